@@ -1,0 +1,97 @@
+//! The one activation that maps raw network output to a physical volume.
+
+use candle_core::{Result, Tensor};
+
+/// Maps raw (pre-activation) volumes to physical ones: density
+/// `sigma = density_scale * softplus(raw_sigma + density_shift)` (>= 0, in 1/world-length), colour
+/// `rgb = sigmoid(raw_rgb)` (in [0, 1]); extra feature channels pass through unchanged.
+///
+/// Softplus rather than ReLU keeps a gradient in empty space, so a generator can grow density
+/// where there was none. The default (`shift = 0`, `scale = 1`) maps raw 0 to sigma = ln 2.
+///
+/// Works on unbatched `(C, D, H, W)` and batched `(N, C, D, H, W)` tensors, on any device, and
+/// is differentiable (it is built from candle ops).
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use radiance_volume::Activation;
+/// let raw = Tensor::zeros((4, 2, 2, 2), candle_core::DType::F32, &Device::Cpu)?;
+/// let phys = Activation::default().apply(&raw)?;
+/// let v: Vec<f32> = phys.flatten_all()?.to_vec1()?;
+/// assert!((v[0] - 2f32.ln()).abs() < 1e-6); // sigma
+/// assert_eq!(v[8], 0.5); // red
+/// # Ok::<(), candle_core::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Activation {
+    /// Added to the raw density before softplus (negative values make raw 0 emptier).
+    pub density_shift: f32,
+    /// Multiplies the softplus output, in 1/world-length.
+    pub density_scale: f32,
+}
+
+impl Default for Activation {
+    fn default() -> Self {
+        Self {
+            density_shift: 0.0,
+            density_scale: 1.0,
+        }
+    }
+}
+
+impl Activation {
+    /// Returns a copy with another density shift.
+    #[must_use]
+    pub fn with_density_shift(self, density_shift: f32) -> Self {
+        Self {
+            density_shift,
+            ..self
+        }
+    }
+
+    /// Returns a copy with another density scale.
+    #[must_use]
+    pub fn with_density_scale(self, density_scale: f32) -> Self {
+        Self {
+            density_scale,
+            ..self
+        }
+    }
+
+    /// Applies the activation to a raw `(C, D, H, W)` or `(N, C, D, H, W)` tensor with C >= 4.
+    pub fn apply(&self, raw: &Tensor) -> Result<Tensor> {
+        let rank = raw.rank();
+        if rank != 4 && rank != 5 {
+            candle_core::bail!(
+                "activation expects (C, D, H, W) or (N, C, D, H, W), got {:?}",
+                raw.shape()
+            );
+        }
+        let channel_dim = rank - 4;
+        let channels = raw.dim(channel_dim)?;
+        if channels < 4 {
+            candle_core::bail!(
+                "activation expects at least 4 channels (sigma, r, g, b), got {channels}"
+            );
+        }
+        let sigma = softplus(&(raw.narrow(channel_dim, 0, 1)? + f64::from(self.density_shift))?)?;
+        let sigma = (sigma * f64::from(self.density_scale))?;
+        let rgb = sigmoid(&raw.narrow(channel_dim, 1, 3)?)?;
+        let mut parts = vec![sigma, rgb];
+        if channels > 4 {
+            parts.push(raw.narrow(channel_dim, 4, channels - 4)?);
+        }
+        Tensor::cat(&parts, channel_dim)
+    }
+}
+
+/// Computes `ln(1 + e^x)` without overflow: `max(x, 0) + ln(1 + e^-|x|)`.
+fn softplus(x: &Tensor) -> Result<Tensor> {
+    x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
+/// Computes `1 / (1 + e^-x)`; for very negative x the exponential overflows to infinity and the
+/// result is exactly 0, which is the correct limit.
+fn sigmoid(x: &Tensor) -> Result<Tensor> {
+    (x.neg()?.exp()? + 1.0)?.recip()
+}

@@ -1,0 +1,33 @@
+//! volgen: reusable 3D-generative building blocks on [candle](https://github.com/huggingface/candle),
+//! and SinGRAV, a generative radiance volume learned from multi-view RGB-D images of one scene.
+//!
+//! This crate only composes the workspace's focused crates (each usable on its own) and ships
+//! the `volgen` command-line tool:
+//!
+//! | module | crate | what it holds |
+//! |---|---|---|
+//! | [`volume`] | `radiance-volume` | the volume type, sampling, resampling, occupancy, edits, I/O |
+//! | [`render`] | `volrender` | cameras, rays, the differentiable volume renderer |
+//! | [`embed`] | `csg-embed` | Cartesian spatial grid and Fourier encodings |
+//! | [`gan`] | `patch-gan` | Conv3d, generators, patch discriminators, WGAN-GP |
+//! | [`swd`] | `swd-loss` | sliced Wasserstein distance and texture losses |
+//! | [`singrav`] | `singrav` | the SinGRAV model |
+//!
+//! ```
+//! use volgen::prelude::*;
+//! let v = RadianceVolume::from_fn(GridDims::cube(8), Aabb::CUBE, 4, |p, o| o[0] = p.x.max(0.0))?;
+//! assert_eq!(v.dims(), GridDims::cube(8));
+//! # Ok::<(), volgen::volume::Error>(())
+//! ```
+
+pub use csg_embed as embed;
+pub use patch_gan as gan;
+pub use radiance_volume as volume;
+pub use singrav;
+pub use swd_loss as swd;
+pub use volrender as render;
+
+/// The types most users need.
+pub mod prelude {
+    pub use radiance_volume::prelude::*;
+}
