@@ -1,0 +1,3 @@
+mod benchmarks;
+
+criterion::criterion_main!(benchmarks::conv3d::benches);

@@ -1,0 +1,1 @@
+pub mod conv3d;

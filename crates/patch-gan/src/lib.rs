@@ -1,0 +1,59 @@
+//! The networks of SinGRAV on candle: a 3D convolution, the 3D generator, the 2D patch
+//! discriminator, the final 2D upsampler, and WGAN-GP losses.
+//!
+//! candle has no 3D convolution; [`Conv3d`] (and [`functional::conv3d`]) fills that gap on the CPU
+//! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight.
+//!
+//! Conventions:
+//! - Volumes are `(N, C, D, H, W)` (D along z, H along y, W along x), images `(N, C, H, W)`.
+//! - Layers follow PyTorch: Conv3d weights are `(C_out, C_in, k, k, k)` named `weight` and `bias`,
+//!   BatchNorm3d tensors `weight`, `bias`, `running_mean`, `running_var`, so a PyTorch state dict
+//!   saved as safetensors loads through `VarBuilder::from_mmaped_safetensors`. New weights use
+//!   PyTorch's default init (uniform in `±1/sqrt(fan_in)` for conv weights and biases).
+//! - Networks are built from `vb.pp(..)` per sub-layer, so checkpoint names are stable
+//!   (`blocks.{i}.conv.weight`, `blocks.{i}.bn.running_mean`, `tail.bias`, ...).
+//! - Layers with batch norm implement `ModuleT` (`train = true` uses batch statistics and updates
+//!   the running ones); the others implement `Module`.
+//! - Losses are plain functions; randomness comes from a caller's RNG.
+//!
+//! ```
+//! use candle_core::{DType, Device, Module, ModuleT, Tensor};
+//! use candle_nn::{VarBuilder, VarMap};
+//! use patch_gan::*;
+//! let dev = Device::Cpu;
+//! let varmap = VarMap::new();
+//! let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
+//! // G_1 turns noise + CSG grid (3 channels) into a raw (sigma, RGB) volume.
+//! let g1 = Generator3d::new(&Generator3dConfig::for_scale(1, 5), vb.pp("g1"))?;
+//! let volume = g1.forward_t(&Tensor::randn(0f32, 1., (1, 3, 8, 8, 8), &dev)?, true)?;
+//! assert_eq!(volume.dims(), &[1, 4, 8, 8, 8]);
+//! // D_1 scores RGB + depth renderings patch by patch.
+//! let d1 = PatchDiscriminator2d::new(&PatchDiscriminator2dConfig::default(), vb.pp("d1"))?;
+//! let scores = d1.forward(&Tensor::randn(0f32, 1., (1, 4, 16, 16), &dev)?)?;
+//! assert_eq!(scores.dims(), &[1, 1, 6, 6]);
+//! let loss = generator_loss(&scores)?;
+//! # let _ = loss;
+//! # Ok::<(), patch_gan::Error>(())
+//! ```
+
+mod conv3d;
+mod discriminator;
+mod error;
+mod generator;
+mod init;
+mod norm;
+mod upsampler;
+mod wgan;
+
+/// Stateless ops, named after `torch.nn.functional`.
+pub mod functional {
+    pub use crate::conv3d::op::conv3d;
+}
+
+pub use conv3d::{conv3d, conv3d_no_bias, Conv3d, Conv3dConfig};
+pub use discriminator::{receptive_field, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+pub use error::{Error, Result};
+pub use generator::{Generator3d, Generator3dConfig};
+pub use norm::{batch_norm3d, leaky_relu, BatchNorm3d, InstanceNorm2d, LEAKY_SLOPE, NORM_EPS};
+pub use upsampler::{upsample_bilinear2x, Upsampler2d, Upsampler2dConfig};
+pub use wgan::{critic_loss, generator_loss, gradient_penalty, GradientNorm, GradientPenalty};

@@ -1,0 +1,15 @@
+//! Reading and writing volumes: safetensors (native, always on), OpenVDB (feature `vdb`) and
+//! EXR slice stacks (feature `exr`), plus the atomic-write helper every writer uses.
+
+mod atomic;
+#[cfg(feature = "exr")]
+pub mod exr_slices;
+pub mod safetensors;
+#[cfg(feature = "vdb")]
+pub mod vdb;
+
+pub use atomic::{check_writable, write_atomic};
+#[cfg(feature = "exr")]
+pub use exr_slices::ExrSlicesWriter;
+#[cfg(feature = "vdb")]
+pub use vdb::{VdbStats, VdbWriter};

@@ -1,0 +1,197 @@
+//! The non-tree parts of a VDB file: magic number and archive header, metadata entries, grid
+//! descriptors and the index -> world transform (OpenVDB `io/Archive.cc`, `io/GridDescriptor.cc`,
+//! `math/Maps.h`).
+
+use glam::DVec3;
+
+use super::bytes::PutBytes;
+use crate::grid::VoxelGrid;
+
+/// The 8-byte magic number every VDB file starts with (`" BDV"` then four zero bytes).
+pub(crate) const MAGIC: i64 = 0x5644_4220;
+/// The file format version written: 224 (`OPENVDB_FILE_VERSION_MULTIPASS_IO`), which every
+/// OpenVDB from 6.x on (and so every Blender with volume objects) reads.
+pub(crate) const FILE_VERSION: u32 = 224;
+/// The oldest version we read: 222 introduced per-grid compression flags and per-node metadata
+/// bytes, which the reader relies on.
+pub(crate) const MIN_READ_VERSION: u32 = 222;
+/// The library version recorded in the header. OpenVDB 10.0 writes file version 224, so readers
+/// that gate behaviour on the pair see a consistent one.
+const LIBRARY_VERSION: (u32, u32) = (10, 0);
+
+/// Per-grid compression flag: leaf and node value arrays are zlib streams.
+pub(crate) const COMPRESS_ZIP: u32 = 0x1;
+/// Per-grid compression flag: only active values are stored when the inactive ones equal the
+/// background.
+pub(crate) const COMPRESS_ACTIVE_MASK: u32 = 0x2;
+/// Per-grid compression flag: Blosc (read by vdb-rs, never written here).
+pub(crate) const COMPRESS_BLOSC: u32 = 0x4;
+
+/// A metadata value of one of the types OpenVDB registers.
+pub(crate) enum MetaValue<'a> {
+    Str(&'a str),
+    Bool(bool),
+    I64(i64),
+    Vec3i([i32; 3]),
+}
+
+/// Appends a metadata map: `u32 count`, then per entry `string name, string type, u32 size,
+/// value`. Entries must be sorted by name, the order of OpenVDB's `std::map`-backed `MetaMap`.
+pub(crate) fn put_metadata(buf: &mut Vec<u8>, entries: &[(&str, MetaValue<'_>)]) {
+    debug_assert!(entries.windows(2).all(|p| p[0].0 < p[1].0));
+    buf.put_u32(entries.len() as u32);
+    for (name, value) in entries {
+        buf.put_str(name);
+        match value {
+            MetaValue::Str(s) => {
+                buf.put_str("string");
+                buf.put_str(s);
+            }
+            MetaValue::Bool(b) => {
+                buf.put_str("bool");
+                buf.put_u32(1);
+                buf.put_u8(u8::from(*b));
+            }
+            MetaValue::I64(v) => {
+                buf.put_str("int64");
+                buf.put_u32(8);
+                buf.put_i64(*v);
+            }
+            MetaValue::Vec3i(v) => {
+                buf.put_str("vec3i");
+                buf.put_u32(12);
+                v.iter().for_each(|&c| buf.put_i32(c));
+            }
+        }
+    }
+}
+
+/// Appends the archive header: magic, versions, `has_grid_offsets = 1` (so readers can seek to
+/// each grid, and vdb-rs requires it), the 36-character UUID, empty file metadata and the grid
+/// count.
+pub(crate) fn put_header(buf: &mut Vec<u8>, uuid: &str, grid_count: u32) {
+    debug_assert_eq!(uuid.len(), 36);
+    buf.put_i64(MAGIC);
+    buf.put_u32(FILE_VERSION);
+    buf.put_u32(LIBRARY_VERSION.0);
+    buf.put_u32(LIBRARY_VERSION.1);
+    buf.put_u8(1);
+    buf.extend_from_slice(uuid.as_bytes());
+    put_metadata(buf, &[]);
+    buf.put_u32(grid_count);
+}
+
+/// Returns a UUID-shaped 36-character id derived from `parts` (a 128-bit FNV-1a over 8-byte
+/// words, formatted as an RFC 9562 version-8 "custom" UUID). OpenVDB only uses the UUID to tell
+/// files apart; deriving it from the content keeps exports byte-for-byte reproducible.
+pub(crate) fn content_uuid<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> String {
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let (mut a, mut b) = (0xcbf2_9ce4_8422_2325u64, 0x6c62_272e_07bb_0142u64);
+    for part in parts {
+        let mut words = part.chunks_exact(8);
+        for w in &mut words {
+            let w = u64::from_le_bytes(w.try_into().expect("chunks of 8"));
+            a = (a ^ w).wrapping_mul(PRIME);
+            b = (b ^ w.rotate_left(29)).wrapping_mul(PRIME);
+        }
+        for &byte in words.remainder() {
+            a = (a ^ u64::from(byte)).wrapping_mul(PRIME);
+            b = (b ^ u64::from(byte)).wrapping_mul(PRIME);
+        }
+        a ^= part.len() as u64;
+    }
+    // Version 8 in the high nibble of the third group, variant 0b10 in the fourth.
+    let a = (a & !0xf000) | 0x8000;
+    let b = (b & !(0b11 << 62)) | (0b10 << 62);
+    format!(
+        "{:08x}-{:04x}-{:04x}-{:04x}-{:012x}",
+        a >> 32,
+        (a >> 16) & 0xffff,
+        a & 0xffff,
+        b >> 48,
+        b & 0xffff_ffff_ffff
+    )
+}
+
+/// The linear index -> world map of an exported grid: `world = index * voxel_size + translation`,
+/// with voxel centres at integer indices.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Transform {
+    pub(crate) voxel_size: DVec3,
+    pub(crate) translation: DVec3,
+}
+
+impl Transform {
+    /// Returns the map that puts index `(i, j, k)` = `(x, y, z)` at the centre of cell
+    /// `(d=k, h=j, w=i)` of `grid`, computed in f64 from the f32 box.
+    pub(crate) fn for_grid(grid: &VoxelGrid) -> Self {
+        let [w, h, d] = grid.dims.xyz();
+        let min = grid.aabb.min.as_dvec3();
+        let voxel_size =
+            (grid.aabb.max.as_dvec3() - min) / DVec3::new(w as f64, h as f64, d as f64);
+        Self {
+            voxel_size,
+            translation: min + 0.5 * voxel_size,
+        }
+    }
+
+    /// Returns the OpenVDB map type: uniform when the three voxel sizes are exactly equal.
+    pub(crate) fn map_type(&self) -> &'static str {
+        let s = self.voxel_size;
+        if s.x == s.y && s.y == s.z {
+            "UniformScaleTranslateMap"
+        } else {
+            "ScaleTranslateMap"
+        }
+    }
+
+    /// Appends the transform as `ScaleTranslateMap::write` does: the map type name, then the
+    /// translation and the five cached vectors of the scale map (scale, voxel size, 1/scale,
+    /// 1/scale^2, 1/(2 scale)).
+    pub(crate) fn put(&self, buf: &mut Vec<u8>) {
+        let s = self.voxel_size;
+        buf.put_str(self.map_type());
+        for v in [
+            self.translation,
+            s,
+            s.abs(),
+            s.recip(),
+            (s * s).recip(),
+            (2.0 * s).recip(),
+        ] {
+            v.to_array().iter().for_each(|&c| buf.put_f64(c));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{Aabb, GridDims};
+    use glam::Vec3;
+
+    #[test]
+    fn uuid_is_well_formed_and_depends_on_content() {
+        let u1 = content_uuid([&b"abc"[..], &[0u8; 17][..]]);
+        let u2 = content_uuid([&b"abd"[..], &[0u8; 17][..]]);
+        assert_eq!(u1.len(), 36);
+        assert_ne!(u1, u2);
+        assert_eq!(u1.as_bytes()[14], b'8');
+        assert!(u1.chars().all(|c| c == '-' || c.is_ascii_hexdigit()));
+    }
+
+    #[test]
+    fn transform_centres_voxels_and_picks_the_map_type() {
+        let g = VoxelGrid::new(Aabb::CUBE, GridDims::cube(4)).unwrap();
+        let t = Transform::for_grid(&g);
+        assert_eq!(t.voxel_size, DVec3::splat(0.5));
+        assert_eq!(t.translation, DVec3::splat(-0.75));
+        assert_eq!(t.map_type(), "UniformScaleTranslateMap");
+        let aabb = Aabb::try_new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)).unwrap();
+        let g = VoxelGrid::new(aabb, GridDims::cube(4)).unwrap();
+        assert_eq!(Transform::for_grid(&g).map_type(), "ScaleTranslateMap");
+        let mut buf = Vec::new();
+        Transform::for_grid(&g).put(&mut buf);
+        assert_eq!(buf.len(), 4 + "ScaleTranslateMap".len() + 18 * 8);
+    }
+}

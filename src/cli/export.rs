@@ -1,0 +1,113 @@
+//! `volgen export VOLUME --vdb out.vdb --exr-slices out_dir/`: write a volume for Blender and
+//! other OpenVDB / EXR tools.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use radiance_volume::RadianceVolume;
+
+/// Arguments of `volgen export`.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// A volume in volgen's safetensors format.
+    volume: PathBuf,
+    /// Write an OpenVDB file with a `density` float grid and a `color` vec3 grid.
+    #[arg(long, value_name = "FILE")]
+    vdb: Option<PathBuf>,
+    /// Write one EXR per z slice (`NAME.0000.exr`, ...) and a `NAME.json` sidecar into this directory.
+    #[arg(long, value_name = "DIR")]
+    exr_slices: Option<PathBuf>,
+    /// Base name of the EXR slice files (default: the volume file's stem).
+    #[arg(long, value_name = "NAME")]
+    exr_name: Option<String>,
+    /// Store values as half floats (VDB and EXR).
+    #[arg(long)]
+    half: bool,
+    /// Compress VDB leaf buffers with zlib.
+    #[arg(long)]
+    zlib: bool,
+    /// Write only VDB leaves holding a voxel with density above this.
+    #[arg(long, default_value_t = 0.0)]
+    threshold: f32,
+    /// Also write feature channels (beyond sigma, r, g, b) as VDB float grids.
+    #[arg(long)]
+    feature_grids: bool,
+    /// Replace NaN and infinite values with this value instead of failing.
+    #[arg(long, value_name = "VALUE")]
+    replace_non_finite: Option<f32>,
+}
+
+/// Loads the volume and writes each requested format, printing what it wrote.
+pub fn run(args: &ExportArgs) -> Result<()> {
+    if args.vdb.is_none() && args.exr_slices.is_none() {
+        bail!("nothing to export: give --vdb FILE and/or --exr-slices DIR");
+    }
+    let volume = RadianceVolume::load_safetensors(&args.volume)?;
+    if let Some(path) = &args.vdb {
+        write_vdb(&volume, path, args)
+            .with_context(|| format!("exporting {} to OpenVDB", args.volume.display()))?;
+    }
+    if let Some(dir) = &args.exr_slices {
+        write_exr_slices(&volume, dir, args)
+            .with_context(|| format!("exporting {} to EXR slices", args.volume.display()))?;
+    }
+    Ok(())
+}
+
+#[cfg(feature = "vdb")]
+fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &ExportArgs) -> Result<()> {
+    let stats = volume
+        .write_vdb()
+        .half(args.half)
+        .zlib(args.zlib)
+        .threshold(args.threshold)
+        .feature_grids(args.feature_grids)
+        .replace_non_finite(args.replace_non_finite)
+        .to_file(path)?;
+    println!(
+        "wrote {} ({} leaves, {} active voxels, {} bytes)",
+        path.display(),
+        stats.leaves,
+        stats.active_voxels,
+        stats.bytes
+    );
+    Ok(())
+}
+
+#[cfg(not(feature = "vdb"))]
+fn write_vdb(_: &RadianceVolume, _: &std::path::Path, _: &ExportArgs) -> Result<()> {
+    bail!("this volgen was built without the `vdb` feature; rebuild with `--features vdb`")
+}
+
+#[cfg(feature = "exr")]
+fn write_exr_slices(
+    volume: &RadianceVolume,
+    dir: &std::path::Path,
+    args: &ExportArgs,
+) -> Result<()> {
+    let name = match &args.exr_name {
+        Some(name) => name.clone(),
+        None => args
+            .volume
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "volume".to_string()),
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let files = volume
+        .write_exr_slices()
+        .half(args.half)
+        .replace_non_finite(args.replace_non_finite)
+        .to_dir(dir, &name)?;
+    println!(
+        "wrote {} files into {} ({name}.0000.exr ..., {name}.json)",
+        files.len(),
+        dir.display()
+    );
+    Ok(())
+}
+
+#[cfg(not(feature = "exr"))]
+fn write_exr_slices(_: &RadianceVolume, _: &std::path::Path, _: &ExportArgs) -> Result<()> {
+    bail!("this volgen was built without the `exr` feature; rebuild with `--features exr`")
+}
