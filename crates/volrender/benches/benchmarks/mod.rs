@@ -1,0 +1,2 @@
+//! Bench groups, one file per operation.
+pub mod render;

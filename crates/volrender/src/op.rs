@@ -1,0 +1,473 @@
+//! The differentiable render op on candle: a private `CompositeOp` (candle `CustomOp1`, the
+//! volume as its only differentiable input, rays and options captured in the op) and the public
+//! [`render`] / [`render_batch`] wrappers.
+//!
+//! The op's output is a packed `(R, 6)` tensor `[r, g, b, depth, opacity, transmittance]` that
+//! the wrappers narrow, so gradients from every output flow through the one op; the last column
+//! (final transmittance) is kept for the backward and never exposed.
+//!
+//! Determinism: the forward writes each ray's outputs independently. The backward splits the
+//! rays into at most [`BLOCKS`] blocks (tiles of [`TILE`] consecutive rays dealt round-robin, so
+//! the split depends only on the ray count), accumulates each block in order into a private
+//! gradient buffer, and sums the buffers in block order. The gradient bits therefore depend on
+//! the inputs only, not on the thread count or scheduling.
+
+use candle_core::backend::BackendStorage;
+use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor, WithDType};
+use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume};
+use rayon::prelude::*;
+
+use crate::config::RenderConfig;
+use crate::error::{invalid, Error, Result};
+use crate::kernel::{
+    backward_ray, forward_ray, setup_ray, GridSpec, OccView, Params, RayOut, Real, VolumeView,
+};
+use crate::rays::Rays;
+
+/// Columns of the packed output.
+const PACKED: usize = 6;
+/// The most gradient buffers the backward allocates per volume.
+const BLOCKS: usize = 4;
+/// Consecutive rays per tile of the backward's round-robin split.
+const TILE: usize = 64;
+
+/// The outputs of [`render`]: colour `(R, 3)`, and depth `(R)` and opacity `(R)` when asked for.
+#[derive(Debug, Clone)]
+pub struct RenderOutput {
+    /// Composited colour, `(R, 3)`.
+    pub rgb: Tensor,
+    /// Expected depth (distance along the ray), `(R)`, when `outputs.depth` is set.
+    pub depth: Option<Tensor>,
+    /// Opacity in [0, 1], `(R)`, when `outputs.opacity` is set.
+    pub opacity: Option<Tensor>,
+}
+
+/// Renders a physical volume `(C, D, H, W)` (C >= 4: sigma, r, g, b, further channels ignored;
+/// f32 or f64, on the CPU) along `rays`. Differentiable with respect to the volume.
+///
+/// Errors: bad options, a wrong shape, NaN or infinite values, or negative density (the
+/// renderer takes physical volumes, sigma >= 0; values are checked on every call, fused with
+/// the copy the kernel reads from).
+///
+/// ```
+/// use candle_core::{Device, Tensor, Var};
+/// use volrender::{render, Rays, RenderConfig};
+/// let dev = Device::Cpu;
+/// // A constant fog of density 1 and colour (1, 0.5, 0) in [-1, 1]^3.
+/// let vol = Var::from_tensor(&Tensor::cat(&[
+///     Tensor::ones((1, 4, 4, 4), candle_core::DType::F32, &dev)?,
+///     Tensor::ones((1, 4, 4, 4), candle_core::DType::F32, &dev)?,
+///     Tensor::full(0.5f32, (1, 4, 4, 4), &dev)?,
+///     Tensor::zeros((1, 4, 4, 4), candle_core::DType::F32, &dev)?,
+/// ], 0)?)?;
+/// let rays = Rays::new(vec![[0.0, 0.0, 3.0]], vec![[0.0, 0.0, -1.0]])?;
+/// let out = render(vol.as_tensor(), &rays, &RenderConfig::default().with_opacity(true))?;
+/// let opacity = out.opacity.unwrap().to_vec1::<f32>()?[0];
+/// assert!((opacity - (1.0 - (-2.0f32).exp())).abs() < 1e-5);
+/// let grads = out.rgb.sum_all()?.backward()?;
+/// assert_eq!(grads.get(&vol).unwrap().dims(), &[4, 4, 4, 4]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn render(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Result<RenderOutput> {
+    if volume.rank() != 4 {
+        return Err(invalid(
+            "volume",
+            format!(
+                "expected a (C, D, H, W) tensor, got shape {:?}",
+                volume.shape()
+            ),
+        ));
+    }
+    let mut outs = render_batch(&volume.unsqueeze(0)?, std::slice::from_ref(rays), cfg)?;
+    Ok(outs.remove(0))
+}
+
+/// Renders a batch of volumes `(N, C, D, H, W)`, volume `n` along `rays[n]` (bundles may differ
+/// in length); returns one output per volume. Differentiable with respect to the batch.
+pub fn render_batch(
+    volumes: &Tensor,
+    rays: &[Rays],
+    cfg: &RenderConfig,
+) -> Result<Vec<RenderOutput>> {
+    cfg.validate()?;
+    let (n, channels, d, h, w) = volumes.dims5().map_err(|_| {
+        invalid(
+            "volumes",
+            format!(
+                "expected an (N, C, D, H, W) tensor, got shape {:?}",
+                volumes.shape()
+            ),
+        )
+    })?;
+    if channels < 4 || d * h * w == 0 {
+        return Err(invalid(
+            "volumes",
+            format!(
+                "expected C >= 4 channels and non-empty grids, got shape {:?}",
+                volumes.shape()
+            ),
+        ));
+    }
+    if n != rays.len() {
+        return Err(invalid(
+            "rays",
+            format!("{n} volumes but {} ray bundles", rays.len()),
+        ));
+    }
+    if !volumes.device().is_cpu() {
+        return Err(Error::Unsupported {
+            what: "device",
+            why:
+                "the render kernel runs on the CPU; move the volume with `to_device(&Device::Cpu)`"
+                    .into(),
+        });
+    }
+    let dims = GridDims::new(d, h, w);
+    let occupancy = if cfg.skip_empty {
+        (0..n)
+            .map(|i| occupancy_cells(&volumes.get(i)?, cfg))
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        Vec::new()
+    };
+    let packed = match volumes.dtype() {
+        DType::F32 => volumes.apply_op1(CompositeOp::<f32>::new(
+            volumes, dims, rays, cfg, occupancy,
+        )?)?,
+        DType::F64 => volumes.apply_op1(CompositeOp::<f64>::new(
+            volumes, dims, rays, cfg, occupancy,
+        )?)?,
+        other => {
+            return Err(Error::Unsupported {
+                what: "dtype",
+                why: format!("the renderer takes f32 or f64 volumes, got {other:?}").into(),
+            })
+        }
+    };
+    let mut start = 0;
+    rays.iter()
+        .map(|r| {
+            let block = packed.narrow(0, start, r.len())?;
+            start += r.len();
+            let column = |c: usize| block.narrow(1, c, 1).and_then(|t| t.squeeze(1));
+            Ok(RenderOutput {
+                rgb: block.narrow(1, 0, 3)?,
+                depth: cfg.outputs.depth.then(|| column(3)).transpose()?,
+                opacity: cfg.outputs.opacity.then(|| column(4)).transpose()?,
+            })
+        })
+        .collect()
+}
+
+/// An occupancy grid's cells, flattened (z, y, x), as the kernel reads them.
+#[derive(Debug, Clone)]
+struct Occupancy {
+    occupied: Vec<bool>,
+    n: [usize; 3],
+    k: usize,
+}
+
+/// Builds radiance-volume's occupancy grid (threshold 0) of one `(C, D, H, W)` volume.
+///
+/// For f64 volumes it is built from the f32-rounded density, so densities below f32's smallest
+/// subnormal (about 1.4e-45) count as empty.
+fn occupancy_cells(volume: &Tensor, cfg: &RenderConfig) -> Result<Occupancy> {
+    let physical = RadianceVolume::new(volume.narrow(0, 0, 4)?.detach(), cfg.aabb)?;
+    let grid = OccupancyGrid::build(&physical, cfg.occupancy_cell, 0.0)?;
+    let dims = grid.dims();
+    let mut occupied = Vec::with_capacity(dims.voxel_count());
+    for z in 0..dims.d {
+        for y in 0..dims.h {
+            occupied.extend((0..dims.w).map(|x| grid.is_occupied(z, y, x)));
+        }
+    }
+    Ok(Occupancy {
+        occupied,
+        n: [dims.w, dims.h, dims.d],
+        k: grid.voxels_per_cell(),
+    })
+}
+
+/// The render op: interleaved copies of the volumes (validated), rays and options.
+struct CompositeOp<T> {
+    volumes: Vec<Vec<[T; 4]>>,
+    dims: GridDims,
+    channels: usize,
+    rays: Vec<Rays>,
+    occupancy: Vec<Occupancy>,
+    /// Per volume when skipping: is the 2x2x2 corner block with this lower corner all empty?
+    empty_blocks: Vec<Vec<bool>>,
+    grid: GridSpec<T>,
+    params: Params<T>,
+    cfg: RenderConfig,
+}
+
+impl<T: Real + WithDType> CompositeOp<T> {
+    fn new(
+        volumes: &Tensor,
+        dims: GridDims,
+        rays: &[Rays],
+        cfg: &RenderConfig,
+        occupancy: Vec<Occupancy>,
+    ) -> Result<Self> {
+        let channels = volumes.dim(1)?;
+        let planar = volumes.contiguous()?;
+        let (storage, layout) = planar.storage_and_layout();
+        let candle_core::Storage::Cpu(cpu) = &*storage else {
+            return Err(Error::Unsupported {
+                what: "device",
+                why: "the render kernel runs on the CPU".into(),
+            });
+        };
+        let (start, end) = layout
+            .contiguous_offsets()
+            .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
+        let values = &T::cpu_storage_as_slice(cpu)?[start..end];
+        let volumes = interleave(values, rays.len(), channels, dims)?;
+        let empty_blocks = if occupancy.is_empty() {
+            Vec::new()
+        } else {
+            volumes.iter().map(|v| empty_blocks(v, dims)).collect()
+        };
+        Ok(Self {
+            volumes,
+            empty_blocks,
+            dims,
+            channels,
+            rays: rays.to_vec(),
+            occupancy,
+            grid: grid_spec(cfg, dims),
+            params: Params {
+                epsilon: T::of(cfg.epsilon as f64),
+                background: cfg.background.unwrap_or([0.0; 3]).map(|c| T::of(c as f64)),
+                depth: cfg.outputs.depth,
+                opacity: cfg.outputs.opacity,
+            },
+            cfg: *cfg,
+        })
+    }
+
+    fn view(&self, b: usize) -> (VolumeView<'_, T>, Option<OccView<'_>>) {
+        let view = VolumeView {
+            data: &self.volumes[b],
+            n: self.grid.n,
+        };
+        let occ = self.occupancy.get(b).map(|o| OccView {
+            occupied: &o.occupied,
+            empty_block: &self.empty_blocks[b],
+            n: o.n,
+            k: o.k,
+        });
+        (view, occ)
+    }
+
+    /// Renders every ray of every volume into the packed `(R, 6)` layout.
+    fn forward(&self) -> Vec<T> {
+        let total: usize = self.rays.iter().map(Rays::len).sum();
+        let mut out = vec![T::zero(); total * PACKED];
+        let mut rest = out.as_mut_slice();
+        for (b, rays) in self.rays.iter().enumerate() {
+            let (mine, tail) = rest.split_at_mut(rays.len() * PACKED);
+            rest = tail;
+            let (view, occ) = self.view(b);
+            mine.par_chunks_mut(PACKED)
+                .zip(rays.origins().par_iter().zip(rays.dirs().par_iter()))
+                .for_each(|(o, (&origin, &dir))| {
+                    let g = setup_ray(origin, dir, &self.grid, self.cfg.sampler);
+                    let r = forward_ray(&view, occ.as_ref(), &g, &self.params);
+                    o.copy_from_slice(&[r.rgb[0], r.rgb[1], r.rgb[2], r.depth, r.opacity, r.trans]);
+                });
+        }
+        out
+    }
+
+    /// Returns the gradient `(N, C, D, H, W)` (planar, channels >= 4 zero) given the forward's
+    /// packed output and its gradient.
+    fn backward(&self, res: &[T], grad: &[T]) -> Vec<T> {
+        let voxels = self.dims.voxel_count();
+        let mut out = vec![T::zero(); self.rays.len() * self.channels * voxels];
+        let mut first_ray = 0;
+        for (b, rays) in self.rays.iter().enumerate() {
+            let (view, occ) = self.view(b);
+            let tiles = rays.len().div_ceil(TILE);
+            let blocks = tiles.min(BLOCKS);
+            let buffers: Vec<Vec<[T; 4]>> = (0..blocks)
+                .into_par_iter()
+                .map(|block| {
+                    let mut buf = vec![[T::zero(); 4]; voxels];
+                    for tile in (block..tiles).step_by(blocks) {
+                        for r in tile * TILE..((tile + 1) * TILE).min(rays.len()) {
+                            let row = (first_ray + r) * PACKED;
+                            let (p, gr) = (&res[row..row + PACKED], &grad[row..row + PACKED]);
+                            let g = setup_ray(
+                                rays.origins()[r],
+                                rays.dirs()[r],
+                                &self.grid,
+                                self.cfg.sampler,
+                            );
+                            let ray_out = RayOut {
+                                rgb: [p[0], p[1], p[2]],
+                                depth: p[3],
+                                opacity: p[4],
+                                trans: p[5],
+                            };
+                            let g_out = [gr[0], gr[1], gr[2], gr[3], gr[4]];
+                            backward_ray(
+                                &view,
+                                occ.as_ref(),
+                                &g,
+                                &self.params,
+                                &ray_out,
+                                g_out,
+                                &mut buf,
+                            );
+                        }
+                    }
+                    buf
+                })
+                .collect();
+            first_ray += rays.len();
+            // Sum the block buffers in block order, straight into the planar layout.
+            let volume_grad =
+                &mut out[b * self.channels * voxels..(b * self.channels + 4) * voxels];
+            let (sigma, rest) = volume_grad.split_at_mut(voxels);
+            let (red, rest) = rest.split_at_mut(voxels);
+            let (green, blue) = rest.split_at_mut(voxels);
+            const CHUNK: usize = 4096;
+            sigma
+                .par_chunks_mut(CHUNK)
+                .zip(red.par_chunks_mut(CHUNK))
+                .zip(green.par_chunks_mut(CHUNK).zip(blue.par_chunks_mut(CHUNK)))
+                .enumerate()
+                .for_each(|(chunk, ((s, r), (g, bl)))| {
+                    for j in 0..s.len() {
+                        let v = chunk * CHUNK + j;
+                        let mut acc = [T::zero(); 4];
+                        for buf in &buffers {
+                            for c in 0..4 {
+                                acc[c] += buf[v][c];
+                            }
+                        }
+                        (s[j], r[j], g[j], bl[j]) = (acc[0], acc[1], acc[2], acc[3]);
+                    }
+                });
+        }
+        out
+    }
+}
+
+/// Flags each voxel whose trilinear corner block (itself and its +1 neighbours along each axis,
+/// clamped at the far faces exactly as the sampler clamps) holds density exactly 0 everywhere: a
+/// sample whose lower corner is such a voxel has density exactly 0.
+fn empty_blocks<T: Real>(data: &[[T; 4]], dims: GridDims) -> Vec<bool> {
+    (0..dims.voxel_count())
+        .into_par_iter()
+        .map(|i| {
+            let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
+            let (z1, y1, x1) = (
+                (z + 1).min(dims.d - 1),
+                (y + 1).min(dims.h - 1),
+                (x + 1).min(dims.w - 1),
+            );
+            [z, z1].iter().all(|&a| {
+                [y, y1].iter().all(|&b| {
+                    [x, x1]
+                        .iter()
+                        .all(|&c| data[dims.index(a, b, c)][0] == T::zero())
+                })
+            })
+        })
+        .collect()
+}
+
+/// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`
+/// per voxel, checking that every value is finite and every density >= 0.
+fn interleave<T: Real>(
+    values: &[T],
+    n: usize,
+    channels: usize,
+    dims: GridDims,
+) -> Result<Vec<Vec<[T; 4]>>> {
+    let voxels = dims.voxel_count();
+    (0..n)
+        .map(|b| {
+            let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
+            let data: Vec<[T; 4]> = (0..voxels)
+                .into_par_iter()
+                .map(|i| {
+                    [
+                        vol[i],
+                        vol[voxels + i],
+                        vol[2 * voxels + i],
+                        vol[3 * voxels + i],
+                    ]
+                })
+                .collect();
+            let bad = |v: &[T; 4]| !v.iter().all(|x| x.is_finite()) || v[0] < T::zero();
+            let count = data.par_iter().filter(|v| bad(v)).count();
+            if count > 0 {
+                let i = data.iter().position(bad).unwrap_or(0);
+                let c = (0..4).find(|&c| !data[i][c].is_finite()).unwrap_or(0);
+                let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
+                return Err(Error::InvalidVolume {
+                    count,
+                    first: format!(
+                        "volume {b}, channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {:?}",
+                        radiance_volume::BASE_CHANNELS[c],
+                        data[i][c]
+                    ),
+                    why: "values must be finite and density (channel 0) must be >= 0",
+                });
+            }
+            Ok(data)
+        })
+        .collect()
+}
+
+impl<T: Real + WithDType> CustomOp1 for CompositeOp<T> {
+    fn name(&self) -> &'static str {
+        "volrender-composite"
+    }
+
+    fn cpu_fwd(
+        &self,
+        storage: &CpuStorage,
+        _layout: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        // The kernel reads the interleaved copy made (and validated) when the op was built from
+        // this very tensor; only the dtype needs to agree.
+        if storage.dtype() != T::DTYPE {
+            candle_core::bail!(
+                "{}: op built for {:?}, called on {:?}",
+                self.name(),
+                T::DTYPE,
+                storage.dtype()
+            );
+        }
+        let out = self.forward();
+        let rows = out.len() / PACKED;
+        Ok((T::to_cpu_storage_owned(out), Shape::from((rows, PACKED))))
+    }
+
+    fn bwd(
+        &self,
+        arg: &Tensor,
+        res: &Tensor,
+        grad_res: &Tensor,
+    ) -> candle_core::Result<Option<Tensor>> {
+        let res: Vec<T> = res.flatten_all()?.to_vec1()?;
+        let grad: Vec<T> = grad_res.flatten_all()?.to_vec1()?;
+        let g = self.backward(&res, &grad);
+        Ok(Some(Tensor::from_vec(g, arg.shape(), arg.device())?))
+    }
+}
+
+/// Returns the volume's box and cells in kernel precision.
+pub(crate) fn grid_spec<T: Real>(cfg: &RenderConfig, dims: GridDims) -> GridSpec<T> {
+    let of = |v: glam::Vec3| v.to_array().map(|x| T::of(x as f64));
+    GridSpec {
+        min: of(cfg.aabb.min),
+        max: of(cfg.aabb.max),
+        n: [dims.w, dims.h, dims.d],
+    }
+}

@@ -1,0 +1,176 @@
+//! Stability under extreme inputs: outputs and gradients stay finite, opacity in [0, 1]; bad
+//! volumes are rejected with a clear error.
+
+mod common;
+
+use candle_core::{DType, Device, Tensor, Var};
+use volrender::{render, Error, RenderConfig, Sampler};
+
+use common::{mixed_rays, rng, values};
+
+fn constant_volume(dims: (usize, usize, usize), sigma: f32, dtype: DType) -> Tensor {
+    let (d, h, w) = dims;
+    let s = Tensor::full(sigma, (1, d, h, w), &Device::Cpu).unwrap();
+    let c = Tensor::full(0.7f32, (3, d, h, w), &Device::Cpu).unwrap();
+    Tensor::cat(&[s, c], 0).unwrap().to_dtype(dtype).unwrap()
+}
+
+/// Renders with every output, backpropagates a loss touching all of them, and checks finiteness
+/// and the opacity range; returns (rgb, opacity).
+fn render_and_check(vol: &Tensor, sampler: Sampler) -> (Vec<f64>, Vec<f64>) {
+    let rays = mixed_rays(&mut rng(1), 8);
+    let cfg = RenderConfig::default()
+        .with_sampler(sampler)
+        .with_depth(true)
+        .with_opacity(true)
+        .with_background([0.2, 0.2, 0.2]);
+    let var = Var::from_tensor(vol).unwrap();
+    let out = render(var.as_tensor(), &rays, &cfg).unwrap();
+    let (rgb, depth, opacity) = (
+        values(&out.rgb),
+        values(out.depth.as_ref().unwrap()),
+        values(out.opacity.as_ref().unwrap()),
+    );
+    assert!(
+        rgb.iter().chain(&depth).all(|x| x.is_finite()),
+        "non-finite output"
+    );
+    assert!(
+        opacity.iter().all(|a| (0.0..=1.0).contains(a)),
+        "opacity out of [0, 1]: {opacity:?}"
+    );
+    let loss = (out.rgb.sum_all().unwrap()
+        + out.depth.unwrap().sum_all().unwrap()
+        + out.opacity.unwrap().sum_all().unwrap())
+    .unwrap();
+    let grad = values(loss.backward().unwrap().get(&var).unwrap());
+    assert!(grad.iter().all(|g| g.is_finite()), "non-finite gradient");
+    (rgb, opacity)
+}
+
+#[test]
+fn extreme_densities_stay_finite() {
+    for dtype in [DType::F32, DType::F64] {
+        for sigma in [0.0, 1e-12, 1e6, 1e30, f32::MAX] {
+            for sampler in [
+                Sampler::Uniform { samples: 16 },
+                Sampler::PerVoxel { per_voxel: 3 },
+            ] {
+                let (rgb, opacity) =
+                    render_and_check(&constant_volume((4, 3, 5), sigma, dtype), sampler);
+                // Ray 0 (generic) goes through the box.
+                if sigma == 0.0 {
+                    assert_eq!(opacity[0], 0.0);
+                    assert!(
+                        (rgb[0] - 0.2).abs() < 1e-7,
+                        "background shows through empty space"
+                    );
+                }
+                if sigma >= 1e6 {
+                    assert!((opacity[0] - 1.0).abs() < 1e-6);
+                    assert!(
+                        (rgb[0] - 0.7).abs() < 1e-6,
+                        "an opaque volume shows its colour"
+                    );
+                }
+                if sigma == 1e-12 && dtype == DType::F64 {
+                    assert!(opacity[0] > 0.0 && opacity[0] < 1e-11);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn tiny_grids_stay_finite() {
+    for dims in [(1, 1, 1), (1, 1, 7), (7, 1, 1), (1, 5, 1)] {
+        for sigma in [0.0, 2.0, 1e30] {
+            render_and_check(
+                &constant_volume(dims, sigma, DType::F32),
+                Sampler::Uniform { samples: 5 },
+            );
+        }
+    }
+}
+
+#[test]
+fn a_zero_length_segment_renders_nothing() {
+    let rays = volrender::Rays::new(vec![[0.0, 2.0, 0.5]], vec![[1.0, -1.0, 0.0]]).unwrap();
+    let vol = constant_volume((2, 2, 2), 5.0, DType::F64);
+    let cfg = RenderConfig::default().with_opacity(true);
+    let var = Var::from_tensor(&vol).unwrap();
+    let out = render(var.as_tensor(), &rays, &cfg).unwrap();
+    assert_eq!(values(out.opacity.as_ref().unwrap()), vec![0.0]);
+    let g = values(
+        out.opacity
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap()
+            .get(&var)
+            .unwrap(),
+    );
+    assert!(g.iter().all(|&x| x == 0.0));
+}
+
+#[test]
+fn bad_volumes_are_rejected_with_their_location() {
+    let rays = mixed_rays(&mut rng(2), 0);
+    let cfg = RenderConfig::default();
+    let base: Vec<f32> = constant_volume((2, 3, 4), 1.0, DType::F32)
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    for (at, value, what) in [
+        (5, f32::NAN, "NaN"),
+        (30, f32::INFINITY, "inf"),
+        (7, -1.0, "-1"),
+    ] {
+        let mut v = base.clone();
+        v[at] = value;
+        let vol = Tensor::from_vec(v, (4, 2, 3, 4), &Device::Cpu).unwrap();
+        match render(&vol, &rays, &cfg) {
+            Err(Error::InvalidVolume {
+                count: 1, first, ..
+            }) => {
+                assert!(first.contains(what), "{first}");
+                assert!(first.contains("voxel"), "{first}");
+            }
+            other => panic!("expected InvalidVolume for {what}, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn bad_arguments_are_rejected() {
+    let rays = mixed_rays(&mut rng(2), 0);
+    let vol = constant_volume((2, 2, 2), 1.0, DType::F32);
+    let bad = |cfg: RenderConfig| render(&vol, &rays, &cfg).is_err();
+    assert!(bad(
+        RenderConfig::default().with_sampler(Sampler::Uniform { samples: 0 })
+    ));
+    assert!(bad(RenderConfig::default().with_epsilon(1.5)));
+    assert!(bad(RenderConfig::default().with_background([
+        f32::NAN,
+        0.0,
+        0.0
+    ])));
+    assert!(render(
+        &vol.narrow(0, 0, 3).unwrap(),
+        &rays,
+        &RenderConfig::default()
+    )
+    .is_err());
+    assert!(render(
+        &vol.to_dtype(DType::BF16).unwrap(),
+        &rays,
+        &RenderConfig::default()
+    )
+    .is_err());
+    let batch = vol.unsqueeze(0).unwrap();
+    assert!(
+        volrender::render_batch(&batch, &[rays.clone(), rays], &RenderConfig::default()).is_err()
+    );
+}

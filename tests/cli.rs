@@ -1,0 +1,125 @@
+//! The `volgen` binary end to end: info, export and render on a small volume, and clear errors.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use radiance_volume::{Aabb, GridDims, RadianceVolume};
+
+fn volgen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volgen"))
+        .args(args)
+        .output()
+        .expect("volgen runs")
+}
+
+fn small_volume(dir: &Path) -> String {
+    let v = RadianceVolume::from_fn(GridDims::new(12, 16, 20), Aabb::CUBE, 4, |p, o| {
+        o[0] = if p.length() < 0.5 { 8.0 } else { 0.0 };
+        o[1..4].copy_from_slice(&[0.9, 0.4, 0.1]);
+    })
+    .unwrap();
+    let path = dir.join("ball.safetensors");
+    v.save_safetensors(&path).unwrap();
+    path.to_string_lossy().into_owned()
+}
+
+#[test]
+fn info_export_and_render_write_what_they_say() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = small_volume(dir.path());
+
+    let out = volgen(&["info", &vol]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("12 x 16 x 20") && text.contains("sigma"),
+        "{text}"
+    );
+
+    let vdb = dir.path().join("ball.vdb");
+    let slices = dir.path().join("slices");
+    let out = volgen(&[
+        "export",
+        &vol,
+        "--vdb",
+        vdb.to_str().unwrap(),
+        "--exr-slices",
+        slices.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let original = RadianceVolume::load_safetensors(&vol).unwrap();
+    let back = RadianceVolume::read_vdb(&vdb, original.grid()).unwrap();
+    let diff = (back.density().unwrap() - original.density().unwrap())
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap();
+    assert!(diff.to_scalar::<f32>().unwrap() < 1e-6);
+    let stack = RadianceVolume::read_exr_slices(&slices, "ball").unwrap();
+    assert_eq!(stack.dims(), original.dims());
+
+    let cameras = dir.path().join("transforms.json");
+    std::fs::write(
+        &cameras,
+        r#"{"camera_angle_x": 0.6, "frames": [{"file_path": "./r_0.png",
+            "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
+    let renders = dir.path().join("renders");
+    let out = volgen(&[
+        "render",
+        &vol,
+        "--cameras",
+        cameras.to_str().unwrap(),
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--samples",
+        "32",
+        "--out",
+        renders.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(renders.join("r_0.exr").is_file() && renders.join("r_0.png").is_file());
+}
+
+#[test]
+fn bad_input_is_a_clear_error_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.safetensors");
+    let out = volgen(&["info", missing.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("missing.safetensors") && !err.contains("panicked"),
+        "{err}"
+    );
+
+    let vol = small_volume(dir.path());
+    let out = volgen(&["export", &vol]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nothing to export"));
+
+    let out = volgen(&[
+        "export",
+        &vol,
+        "--vdb",
+        dir.path().join("no/dir/x.vdb").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no/dir/x.vdb"));
+}
