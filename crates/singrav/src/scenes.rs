@@ -19,7 +19,7 @@ const SUN: Vec3 = Vec3::new(0.45, -0.35, 0.82);
 /// A ring of weathered standing stones on a grassy mound.
 ///
 /// ```
-/// use singrav::scenes::StandingStones;
+/// use singrav::scenes::{Scene, StandingStones};
 /// use radiance_volume::GridDims;
 /// let scene = StandingStones::new(7);
 /// let v = scene.to_volume(GridDims::cube(24))?;
