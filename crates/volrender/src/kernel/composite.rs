@@ -13,7 +13,7 @@
 //! `dL/dc_i = w_i dL/dC`. One pass, in sample order, with no per-sample storage.
 
 use super::march::{march, OccView, RayGeom};
-use super::trilinear::{corners, gather, scatter};
+use super::trilinear::{corners, gather, scatter, Corners};
 use super::{Real, VolumeView};
 
 /// Per-render constants of the compositing.
@@ -54,6 +54,30 @@ fn attenuation<T: Real>(tau: T) -> (T, T) {
     }
 }
 
+/// Walks one ray's samples in order, calling `f(t, corners, values)` with each sample's
+/// trilinear corners and interpolated `[sigma, r, g, b]` until `f` returns false. Samples outside
+/// the grid and samples in blocks the occupancy grid marks empty (density exactly 0 there, so
+/// they add nothing to the forward or the backward) are passed over.
+#[inline(always)]
+fn for_each_sample<T: Real>(
+    vol: &VolumeView<'_, T>,
+    occ: Option<&OccView<'_>>,
+    g: &RayGeom<T>,
+    mut f: impl FnMut(T, &Corners<T>, [T; 4]) -> bool,
+) {
+    march(g, occ, |t, u| {
+        let Some(c) = corners(vol.n, u) else {
+            return true;
+        };
+        if occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
+            // Density exactly 0 at this sample: it adds nothing (skipping is on).
+            return true;
+        }
+        let v = gather(vol, &c);
+        f(t, &c, v)
+    });
+}
+
 /// Renders one ray.
 #[inline]
 pub(crate) fn forward_ray<T: Real>(
@@ -65,15 +89,7 @@ pub(crate) fn forward_ray<T: Real>(
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
-    march(g, occ, |t, u| {
-        let Some(c) = corners(vol.n, u) else {
-            return true;
-        };
-        if occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
-            // Density exactly 0 at this sample: it adds nothing (skipping is on).
-            return true;
-        }
-        let v = gather(vol, &c);
+    for_each_sample(vol, occ, g, |t, _, v| {
         let (alpha, keep) = attenuation(v[0] * g.dt);
         let w = trans * alpha;
         for ch in 0..3 {
@@ -117,22 +133,14 @@ pub(crate) fn backward_ray<T: Real>(
     let opacity_term = ga * out.trans;
     let mut upto = T::zero();
     let mut trans = T::one();
-    march(g, occ, |t, u| {
-        let Some(c) = corners(vol.n, u) else {
-            return true;
-        };
-        if occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
-            // Density exactly 0 at this sample: it adds nothing (skipping is on).
-            return true;
-        }
-        let v = gather(vol, &c);
+    for_each_sample(vol, occ, g, |t, c, v| {
         let (alpha, keep) = attenuation(v[0] * g.dt);
         let w = trans * alpha;
         let next = trans * keep;
         let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * t;
         upto = upto + w * x;
         let d_tau = next * x - (total - upto) + opacity_term;
-        scatter(buf, &c, [d_tau * g.dt, w * gr, w * gg, w * gb]);
+        scatter(buf, c, [d_tau * g.dt, w * gr, w * gg, w * gb]);
         trans = next;
         trans > p.epsilon
     });
