@@ -2,8 +2,8 @@
 
 mod common;
 
-use candle_core::{Device, Tensor, Var};
-use common::{matrix, pseudo_random_rows};
+use candle_core::{Device, Tensor};
+use common::{check_gradient, matrix, pseudo_random_rows};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use swd_loss::{
@@ -11,37 +11,10 @@ use swd_loss::{
     TextureLoss, TextureLossConfig,
 };
 
-const EPS: f64 = 1e-6;
-
-/// Compares the autograd gradient of `f` at `x0` with central differences at every listed
-/// entry. The losses are piecewise smooth (the sort order changes only on ties), so with
-/// distinct projected values and a small step the differences are accurate to ~1e-8.
-fn check_gradient(x0: &Tensor, entries: &[usize], f: impl Fn(&Tensor) -> Tensor) {
-    let var = Var::from_tensor(x0).unwrap();
-    let grads = f(var.as_tensor()).backward().unwrap();
-    let g = grads
-        .get(var.as_tensor())
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .to_vec1::<f64>()
-        .unwrap();
-    let flat = x0.flatten_all().unwrap().to_vec1::<f64>().unwrap();
-    let eval = |i: usize, h: f64| {
-        let mut v = flat.clone();
-        v[i] += h;
-        let t = Tensor::from_vec(v, x0.shape(), &Device::Cpu).unwrap();
-        f(&t).to_scalar::<f64>().unwrap()
-    };
-    for &i in entries {
-        let fd = (eval(i, EPS) - eval(i, -EPS)) / (2.0 * EPS);
-        let tol = 1e-6 + 1e-5 * fd.abs();
-        assert!(
-            (g[i] - fd).abs() <= tol,
-            "entry {i}: autograd {} vs finite difference {fd}",
-            g[i]
-        );
-    }
+/// The losses are piecewise smooth (the sort order changes only on ties), so with distinct
+/// projected values and a small step the differences are accurate to ~1e-8.
+fn check_gradient_loss(x0: &Tensor, entries: &[usize], f: impl Fn(&Tensor) -> Tensor) {
+    check_gradient(x0, entries, 1e-6, 1e-5, f);
 }
 
 fn point_sets(n: usize, m: usize) -> (Tensor, Tensor) {
@@ -59,10 +32,10 @@ fn point_set_gradients_match_finite_differences() {
         let all_x: Vec<usize> = (0..n * 3).collect();
         let all_y: Vec<usize> = (0..m * 3).collect();
         for metric in [Metric::SquaredW2, Metric::W1] {
-            check_gradient(&x, &all_x, |x| {
+            check_gradient_loss(&x, &all_x, |x| {
                 sliced_wasserstein(x, &y, &p, metric).unwrap()
             });
-            check_gradient(&y, &all_y, |y| {
+            check_gradient_loss(&y, &all_y, |y| {
                 sliced_wasserstein(&x, y, &p, metric).unwrap()
             });
         }
@@ -95,7 +68,7 @@ fn texture_loss_gradient_matches_finite_differences() {
         let proj = loss
             .draw_projections(&tgt, &mut ChaCha8Rng::seed_from_u64(5))
             .unwrap();
-        check_gradient(&generated, &entries, |g| {
+        check_gradient_loss(&generated, &entries, |g| {
             loss.loss_with_projections(g, &tgt, &proj).unwrap()
         });
     }

@@ -2,7 +2,7 @@
 
 #![allow(dead_code)] // each test binary uses a different subset
 
-use candle_core::{Device, Tensor};
+use candle_core::{Device, Tensor, Var};
 
 /// `W_p^p` between uniform empirical measures on `x` and `y`, by the common refinement: each
 /// x value is repeated m times and each y value n times, so both lists have n m equally
@@ -79,4 +79,40 @@ pub fn assert_rel_close(a: f64, b: f64, tol: f64, what: &str) {
         "{what}: {a} vs {b} (rel {:e})",
         (a - b).abs() / scale
     );
+}
+
+/// Compares the autograd gradient of the scalar `f` at the f64 tensor `x0` with central
+/// differences (step 1e-6) at every listed flat entry, within `abs_tol + rel_tol * |fd|`.
+pub fn check_gradient(
+    x0: &Tensor,
+    entries: &[usize],
+    abs_tol: f64,
+    rel_tol: f64,
+    f: impl Fn(&Tensor) -> Tensor,
+) {
+    const EPS: f64 = 1e-6;
+    let var = Var::from_tensor(x0).unwrap();
+    let grads = f(var.as_tensor()).backward().unwrap();
+    let g = grads
+        .get(var.as_tensor())
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f64>()
+        .unwrap();
+    let flat = x0.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+    let eval = |i: usize, h: f64| {
+        let mut v = flat.clone();
+        v[i] += h;
+        let t = Tensor::from_vec(v, x0.shape(), &Device::Cpu).unwrap();
+        f(&t).to_scalar::<f64>().unwrap()
+    };
+    for &i in entries {
+        let fd = (eval(i, EPS) - eval(i, -EPS)) / (2.0 * EPS);
+        assert!(
+            (g[i] - fd).abs() <= abs_tol + rel_tol * fd.abs(),
+            "entry {i}: autograd {} vs finite difference {fd}",
+            g[i]
+        );
+    }
 }
