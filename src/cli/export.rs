@@ -20,6 +20,13 @@ pub struct ExportArgs {
     /// Base name of the EXR slice files (default: the volume file's stem).
     #[arg(long, value_name = "NAME")]
     exr_name: Option<String>,
+    #[command(flatten)]
+    encoding: Encoding,
+}
+
+/// How volumes are encoded in VDB and EXR files (shared by `export` and `sample`).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct Encoding {
     /// Store values as half floats (VDB and EXR).
     #[arg(long)]
     half: bool,
@@ -44,18 +51,26 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     }
     let volume = RadianceVolume::load_safetensors(&args.volume)?;
     if let Some(path) = &args.vdb {
-        write_vdb(&volume, path, args)
+        write_vdb(&volume, path, &args.encoding)
             .with_context(|| format!("exporting {} to OpenVDB", args.volume.display()))?;
     }
     if let Some(dir) = &args.exr_slices {
-        write_exr_slices(&volume, dir, args)
+        let name = match &args.exr_name {
+            Some(name) => name.clone(),
+            None => args
+                .volume
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "volume".to_string()),
+        };
+        write_exr_slices(&volume, dir, &name, &args.encoding)
             .with_context(|| format!("exporting {} to EXR slices", args.volume.display()))?;
     }
     Ok(())
 }
 
 #[cfg(feature = "vdb")]
-fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &ExportArgs) -> Result<()> {
+pub fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &Encoding) -> Result<()> {
     let stats = volume
         .write_vdb()
         .half(args.half)
@@ -75,30 +90,23 @@ fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &ExportArgs)
 }
 
 #[cfg(not(feature = "vdb"))]
-fn write_vdb(_: &RadianceVolume, _: &std::path::Path, _: &ExportArgs) -> Result<()> {
+pub fn write_vdb(_: &RadianceVolume, _: &std::path::Path, _: &Encoding) -> Result<()> {
     bail!("this volgen was built without the `vdb` feature; rebuild with `--features vdb`")
 }
 
 #[cfg(feature = "exr")]
-fn write_exr_slices(
+pub fn write_exr_slices(
     volume: &RadianceVolume,
     dir: &std::path::Path,
-    args: &ExportArgs,
+    name: &str,
+    args: &Encoding,
 ) -> Result<()> {
-    let name = match &args.exr_name {
-        Some(name) => name.clone(),
-        None => args
-            .volume
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "volume".to_string()),
-    };
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let files = volume
         .write_exr_slices()
         .half(args.half)
         .replace_non_finite(args.replace_non_finite)
-        .to_dir(dir, &name)?;
+        .to_dir(dir, name)?;
     println!(
         "wrote {} files into {} ({name}.0000.exr ..., {name}.json)",
         files.len(),
@@ -108,6 +116,6 @@ fn write_exr_slices(
 }
 
 #[cfg(not(feature = "exr"))]
-fn write_exr_slices(_: &RadianceVolume, _: &std::path::Path, _: &ExportArgs) -> Result<()> {
+pub fn write_exr_slices(_: &RadianceVolume, _: &std::path::Path, _: &str, _: &Encoding) -> Result<()> {
     bail!("this volgen was built without the `exr` feature; rebuild with `--features exr`")
 }

@@ -4,9 +4,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod demo;
 mod export;
 mod info;
 mod render;
+mod sample;
+mod train;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.
 #[derive(Debug, Parser)]
@@ -24,15 +27,27 @@ enum Command {
     Export(export::ExportArgs),
     /// Render a volume from the cameras of a transforms.json to EXR (R, G, B, A, Z) and PNG.
     Render(render::RenderArgs),
+    /// Train SinGRAV on a transforms.json RGB-D dataset (progress bar, log, checkpoints).
+    Train(train::TrainArgs),
+    /// Generate new scenes from a trained model: volumes, VDB/EXR on request, PNG views.
+    Sample(sample::SampleArgs),
+    /// The whole pipeline: dataset of a built-in scene, tiny training, samples, pictures, VDB.
+    Demo(demo::DemoArgs),
 }
 
 /// Parses the command line, runs the subcommand and turns errors into a message and exit code 1.
 pub fn run() -> ExitCode {
+    // Training differentiates a gradient (WGAN-GP), which candle supports only when this is set
+    // before the first backward pass; set here, at start-up, before any other thread exists.
+    std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Render(args) => render::run(&args),
+        Command::Train(args) => train::run(&args),
+        Command::Sample(args) => sample::run(&args),
+        Command::Demo(args) => demo::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

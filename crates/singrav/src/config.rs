@@ -1,0 +1,319 @@
+//! Training configuration: the pyramid's sizes, the schedule, the loss weights, the ablation
+//! switches, and the named presets (`paper`, `small`, `tiny`, `micro`).
+
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{invalid, Error, Result};
+
+/// Everything that defines a training run; saved as `config.json` beside every checkpoint so a
+/// run can be resumed and a model sampled without guessing how it was built.
+///
+/// Scales are numbered from 1 as in the paper. Scales `1..N-1` are 3D generators with volume
+/// sizes `volume_sizes` and rendering sizes `image_sizes` (one entry per 3D scale); scale `N` is
+/// the 2D upsampler, whose output is `2 * image_sizes[N - 2]` pixels wide.
+///
+/// ```
+/// use singrav::TrainConfig;
+/// let paper = TrainConfig::preset("paper")?;
+/// assert_eq!(paper.scales(), 6);
+/// assert_eq!(paper.volume_sizes, [40, 53, 71, 95, 126]);
+/// assert_eq!(paper.final_image_size(), 320);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    /// The preset this configuration started from (for the record).
+    pub preset: String,
+    /// Volume edge per 3D scale (cubic volumes over `[-1, 1]^3`).
+    pub volume_sizes: Vec<usize>,
+    /// Rendering edge (square images) per 3D scale.
+    pub image_sizes: Vec<usize>,
+    /// Uniform samples per ray per 3D scale.
+    pub samples: Vec<usize>,
+    /// Conv layers L of every generator and discriminator.
+    pub layers: usize,
+    /// Hidden channels of the 3D generators and the discriminators (32 in the paper).
+    pub channels: usize,
+    /// Feature widths of the upsampler G_N (32, 16, 8, 8 in the paper).
+    pub upsampler_widths: [usize; 4],
+    /// Training iterations per scale (one iteration = `d_steps` critic steps, then `g_steps`
+    /// generator steps).
+    pub iterations: usize,
+    /// The first iterations of each scale train the reconstruction only (a quarter, as the
+    /// paper's 20 of 80 epochs).
+    pub reconstruction_only: usize,
+    /// Critic steps per iteration (3).
+    pub d_steps: usize,
+    /// Generator steps per iteration (3).
+    pub g_steps: usize,
+    /// Adam learning rate (5e-4) for generators and critics.
+    pub learning_rate: f64,
+    /// Adam betas (0.9, 0.999).
+    pub betas: (f64, f64),
+    /// WGAN-GP penalty weight (0.1).
+    pub gp_weight: f64,
+    /// Colour reconstruction weight lambda_c (10).
+    pub lambda_color: f64,
+    /// Depth reconstruction weight lambda_d (30).
+    pub lambda_depth: f64,
+    /// Weight of the sliced Wasserstein texture loss at the last scale.
+    pub lambda_swd: f64,
+    /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
+    pub noise_amp_factor: f64,
+    /// Noise amplitude at the coarsest scale (1).
+    pub noise_amp_first: f64,
+    /// Raw-to-physical density: `sigma = density_scale * softplus(raw + density_shift)`.
+    pub density_scale: f32,
+    /// See [`TrainConfig::density_scale`]; negative so an untrained generator starts as thin fog.
+    pub density_shift: f32,
+    /// The colour transparent pixels are composited onto, in data and renderings.
+    pub background: [f32; 3],
+    /// Ablation switch: the SWD loss at the last scale.
+    pub use_swd: bool,
+    /// Ablation switch: the CSG grid injected at the coarsest scale.
+    pub use_csg: bool,
+    /// Ablation switch: depth supervision (depth channel for the critics and the depth term).
+    pub use_depth: bool,
+    /// Write a checkpoint at least this often within a scale (seconds; 0 = only per scale).
+    pub checkpoint_seconds: u64,
+    /// Also write a checkpoint every this many iterations (0 = off); deterministic, for tests.
+    pub checkpoint_iterations: usize,
+    /// Seed of every random draw: weights, noises, views, penalties, projections.
+    pub seed: u64,
+}
+
+/// The volume grows by 4/3 per scale.
+const VOLUME_GROWTH: f64 = 4.0 / 3.0;
+/// Renderings grow by 1.5 per scale.
+const IMAGE_GROWTH: f64 = 1.5;
+
+/// `count` sizes starting at `first`, each `growth` times the previous, rounded.
+fn geometric(first: usize, growth: f64, count: usize) -> Vec<usize> {
+    (0..count)
+        .map(|i| (first as f64 * growth.powi(i as i32)).round() as usize)
+        .collect()
+}
+
+/// Samples per ray rising linearly from `first` at the coarsest scale to `last` at the finest.
+fn sample_ramp(first: usize, last: usize, count: usize) -> Vec<usize> {
+    (0..count)
+        .map(|i| {
+            if count == 1 {
+                last
+            } else {
+                first + (last - first) * i / (count - 1)
+            }
+        })
+        .collect()
+}
+
+impl TrainConfig {
+    /// The names [`TrainConfig::preset`] accepts.
+    pub const PRESETS: [&'static str; 4] = ["paper", "small", "tiny", "micro"];
+
+    /// A named preset:
+    ///
+    /// - `paper`: the paper's N = 6 (volumes 40..126, renderings 32..160, final 320^2), L = 5,
+    ///   32 channels, 64 to 128 samples. Needs a GPU (see docs/training.md).
+    /// - `small`: N = 5, volumes 24..57, renderings 32..108, 16 channels; an hour-scale CPU run.
+    /// - `tiny`: N = 4, volumes 20..36, renderings 24..54 (final 108^2), 16 channels; about ten
+    ///   minutes on 2 CPU cores.
+    /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds).
+    pub fn preset(name: &str) -> Result<Self> {
+        let paper = Self {
+            preset: "paper".into(),
+            volume_sizes: vec![40, 53, 71, 95, 126],
+            image_sizes: vec![32, 48, 72, 108, 160],
+            samples: sample_ramp(64, 128, 5),
+            layers: 5,
+            channels: 32,
+            upsampler_widths: [32, 16, 8, 8],
+            iterations: 2000,
+            reconstruction_only: 500,
+            d_steps: 3,
+            g_steps: 3,
+            learning_rate: 5e-4,
+            betas: (0.9, 0.999),
+            gp_weight: 0.1,
+            lambda_color: 10.0,
+            lambda_depth: 30.0,
+            lambda_swd: 1.0,
+            noise_amp_factor: 0.1,
+            noise_amp_first: 1.0,
+            density_scale: 25.0,
+            density_shift: -4.0,
+            background: [1.0, 1.0, 1.0],
+            use_swd: true,
+            use_csg: true,
+            use_depth: true,
+            checkpoint_seconds: 300,
+            checkpoint_iterations: 0,
+            seed: 0,
+        };
+        let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
+            preset: preset.into(),
+            volume_sizes: geometric(volume, VOLUME_GROWTH, scales - 1),
+            image_sizes: geometric(image, IMAGE_GROWTH, scales - 1),
+            samples: sample_ramp(48, 96, scales - 1),
+            channels: 16,
+            upsampler_widths: [16, 16, 8, 8],
+            ..paper.clone()
+        };
+        match name {
+            "paper" => Ok(paper),
+            "small" => Ok(Self {
+                iterations: 600,
+                reconstruction_only: 150,
+                checkpoint_seconds: 180,
+                ..scaled("small", 5, 24, 32)
+            }),
+            "tiny" => Ok(Self {
+                iterations: 120,
+                reconstruction_only: 30,
+                checkpoint_seconds: 60,
+                ..scaled("tiny", 4, 20, 24)
+            }),
+            "micro" => Ok(Self {
+                layers: 3,
+                channels: 4,
+                upsampler_widths: [4, 4, 4, 4],
+                samples: vec![16, 16],
+                iterations: 4,
+                reconstruction_only: 1,
+                d_steps: 1,
+                g_steps: 1,
+                checkpoint_seconds: 0,
+                ..scaled("micro", 3, 8, 12)
+            }),
+            other => Err(invalid(
+                "preset",
+                format!(
+                    "unknown preset `{other}`; expected one of {}",
+                    Self::PRESETS.join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// The number of scales N (3D scales plus the upsampler).
+    pub fn scales(&self) -> usize {
+        self.volume_sizes.len() + 1
+    }
+
+    /// The edge of the final (upsampled) images: twice the last rendering.
+    pub fn final_image_size(&self) -> usize {
+        2 * self.image_sizes.last().copied().unwrap_or(0)
+    }
+
+    /// The ablation "number of scales": keeps the `scales - 1` coarsest 3D scales and the
+    /// upsampler, so the final images shrink with the pyramid.
+    pub fn with_scales(mut self, scales: usize) -> Result<Self> {
+        if scales < 2 || scales > self.scales() {
+            return Err(invalid(
+                "scales",
+                format!(
+                    "the `{}` preset has {} scales; choose 2 to {}",
+                    self.preset,
+                    self.scales(),
+                    self.scales()
+                ),
+            ));
+        }
+        self.volume_sizes.truncate(scales - 1);
+        self.image_sizes.truncate(scales - 1);
+        self.samples.truncate(scales - 1);
+        Ok(self)
+    }
+
+    /// Checks that the sizes agree and every setting is in range.
+    pub fn validate(&self) -> Result<()> {
+        let n = self.volume_sizes.len();
+        if n == 0 {
+            return Err(invalid("volume_sizes", "need at least one 3D scale"));
+        }
+        if self.image_sizes.len() != n || self.samples.len() != n {
+            return Err(invalid(
+                "config",
+                format!(
+                    "volume_sizes, image_sizes and samples need one entry per 3D scale; have {}, {} and {}",
+                    n,
+                    self.image_sizes.len(),
+                    self.samples.len()
+                ),
+            ));
+        }
+        let field = 2 * self.layers + 1;
+        if let Some(size) = self.image_sizes.iter().find(|&&s| s <= field) {
+            return Err(invalid(
+                "image_sizes",
+                format!("{size} is not larger than the critics' receptive field {field}"),
+            ));
+        }
+        if self.volume_sizes.contains(&0) || self.samples.contains(&0) {
+            return Err(invalid("volume_sizes / samples", "must be positive"));
+        }
+        if self.layers < 2 || self.channels == 0 || self.upsampler_widths.contains(&0) {
+            return Err(invalid(
+                "layers / channels",
+                "need at least 2 layers and positive widths",
+            ));
+        }
+        if self.iterations == 0 || self.d_steps == 0 || self.g_steps == 0 {
+            return Err(invalid(
+                "iterations / d_steps / g_steps",
+                "must be positive",
+            ));
+        }
+        if self.reconstruction_only > self.iterations {
+            return Err(invalid(
+                "reconstruction_only",
+                format!(
+                    "{} exceeds the {} iterations per scale",
+                    self.reconstruction_only, self.iterations
+                ),
+            ));
+        }
+        let weights = [
+            self.learning_rate,
+            self.gp_weight,
+            self.lambda_color,
+            self.lambda_depth,
+            self.lambda_swd,
+            self.noise_amp_factor,
+            self.noise_amp_first,
+        ];
+        if weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) || self.learning_rate == 0.0 {
+            return Err(invalid(
+                "learning rate / loss weights / noise amplitudes",
+                "must be finite and non-negative (learning rate positive)",
+            ));
+        }
+        if !(self.density_scale.is_finite() && self.density_scale > 0.0)
+            || !self.density_shift.is_finite()
+            || self.background.iter().any(|c| !(0.0..=1.0).contains(c))
+        {
+            return Err(invalid(
+                "density_scale / density_shift / background",
+                "need a positive density scale, a finite shift and a background in [0, 1]",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The activation mapping the generators' raw volumes to physical ones.
+    pub fn activation(&self) -> radiance_volume::Activation {
+        radiance_volume::Activation::default()
+            .with_density_scale(self.density_scale)
+            .with_density_shift(self.density_shift)
+    }
+}
+
+impl FromStr for TrainConfig {
+    type Err = Error;
+
+    fn from_str(name: &str) -> Result<Self> {
+        Self::preset(name)
+    }
+}

@@ -1,0 +1,122 @@
+//! Adam with inspectable state, so a checkpoint can hold the moments and a resumed run takes
+//! exactly the steps an uninterrupted one would (candle-nn's `AdamW` keeps its state private).
+
+use std::collections::HashMap;
+
+use candle_core::backprop::GradStore;
+use candle_core::{Tensor, Var};
+
+use crate::error::Result;
+
+/// Adam (Kingma and Ba) over a fixed, named set of variables, without weight decay.
+///
+/// ```
+/// use candle_core::{Device, Tensor, Var};
+/// use singrav::optim::Adam;
+/// let x = Var::new(&[1f32, -2.0], &Device::Cpu)?;
+/// let mut adam = Adam::new(vec![("x".into(), x.clone())], 0.1, (0.9, 0.999))?;
+/// for _ in 0..200 {
+///     let loss = x.as_tensor().sqr()?.sum_all()?;
+///     adam.step(&loss.backward()?)?;
+/// }
+/// assert!(x.as_tensor().abs()?.max(0)?.to_scalar::<f32>()? < 0.05);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+#[derive(Debug)]
+pub struct Adam {
+    params: Vec<(String, Var)>,
+    first: Vec<Tensor>,
+    second: Vec<Tensor>,
+    steps: usize,
+    learning_rate: f64,
+    betas: (f64, f64),
+}
+
+/// Added to the second moment's root, as in PyTorch.
+const EPS: f64 = 1e-8;
+
+impl Adam {
+    /// An optimiser over `params` (names are used for checkpoints) with zero moments.
+    pub fn new(params: Vec<(String, Var)>, learning_rate: f64, betas: (f64, f64)) -> Result<Self> {
+        let zeros = || -> Result<Vec<Tensor>> {
+            Ok(params
+                .iter()
+                .map(|(_, v)| v.as_tensor().zeros_like())
+                .collect::<candle_core::Result<_>>()?)
+        };
+        Ok(Self {
+            first: zeros()?,
+            second: zeros()?,
+            params,
+            steps: 0,
+            learning_rate,
+            betas,
+        })
+    }
+
+    /// One update of every variable that has a gradient in `grads` (the others keep their
+    /// values and moments).
+    pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.steps += 1;
+        let (b1, b2) = self.betas;
+        let t = self.steps as i32;
+        let step_size = self.learning_rate / (1.0 - b1.powi(t));
+        let second_correction = 1.0 - b2.powi(t);
+        for (i, (_, var)) in self.params.iter().enumerate() {
+            let Some(grad) = grads.get(var.as_tensor()) else {
+                continue;
+            };
+            let m = ((&self.first[i] * b1)? + (grad * (1.0 - b1))?)?;
+            let v = ((&self.second[i] * b2)? + (grad.sqr()? * (1.0 - b2))?)?;
+            let denom = ((&v / second_correction)?.sqrt()? + EPS)?;
+            let update = ((&m / &denom)? * step_size)?;
+            var.set(&var.as_tensor().sub(&update)?)?;
+            self.first[i] = m;
+            self.second[i] = v;
+        }
+        Ok(())
+    }
+
+    /// The number of steps taken.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// The state as named tensors (`{prefix}m.{name}`, `{prefix}v.{name}`) plus the step count.
+    pub fn state(&self, prefix: &str) -> (HashMap<String, Tensor>, usize) {
+        let mut tensors = HashMap::new();
+        for (i, (name, _)) in self.params.iter().enumerate() {
+            tensors.insert(format!("{prefix}m.{name}"), self.first[i].clone());
+            tensors.insert(format!("{prefix}v.{name}"), self.second[i].clone());
+        }
+        (tensors, self.steps)
+    }
+
+    /// Restores the moments saved by [`Adam::state`]; a variable without saved moments (or with
+    /// moments of another shape) is an error naming it.
+    pub fn restore(
+        &mut self,
+        tensors: &HashMap<String, Tensor>,
+        prefix: &str,
+        steps: usize,
+    ) -> std::result::Result<(), String> {
+        for (i, (name, var)) in self.params.iter().enumerate() {
+            for (key, slot) in [("m", &mut self.first[i]), ("v", &mut self.second[i])] {
+                let full = format!("{prefix}{key}.{name}");
+                let saved = tensors
+                    .get(&full)
+                    .ok_or_else(|| format!("optimiser state `{full}` is missing"))?;
+                if saved.shape() != var.as_tensor().shape() {
+                    return Err(format!(
+                        "optimiser state `{full}` has shape {:?}, the variable {:?}",
+                        saved.shape(),
+                        var.as_tensor().shape()
+                    ));
+                }
+                *slot = saved.clone();
+            }
+        }
+        self.steps = steps;
+        Ok(())
+    }
+}

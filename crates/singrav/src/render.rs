@@ -1,0 +1,87 @@
+//! Rendering raw generated volumes into image tensors for the critics and the losses.
+
+use candle_core::{Device, Tensor};
+use radiance_volume::Activation;
+use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+
+use crate::config::TrainConfig;
+use crate::error::{invalid, Result};
+
+/// Renders raw `(1, 4, s, s, s)` volumes (activation included) to `(V, 3, h, w)` colour and
+/// `(V, 1, h, w)` normalised depth, differentiably.
+#[derive(Debug, Clone)]
+pub struct ViewRenderer {
+    activation: Activation,
+    config: RenderConfig,
+    depth_norm: f32,
+}
+
+impl ViewRenderer {
+    /// The renderer of training runs with `config`: `samples` uniform samples per ray, the
+    /// configured background, and depth divided by `depth_norm` (so it is about 1 at the far
+    /// side of the box) when `with_depth`.
+    pub fn new(config: &TrainConfig, samples: usize, depth_norm: f32, with_depth: bool) -> Self {
+        let render = RenderConfig::default()
+            .with_sampler(Sampler::Uniform { samples })
+            .with_background(config.background)
+            .with_depth(with_depth);
+        Self {
+            activation: config.activation(),
+            config: render,
+            depth_norm,
+        }
+    }
+
+    /// Renders `raw` from every camera (all of one size) in one pass of the render op.
+    pub fn render(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<(Tensor, Option<Tensor>)> {
+        let Some(first) = cameras.first() else {
+            return Err(invalid("cameras", "need at least one camera"));
+        };
+        let (w, h) = (first.width, first.height);
+        if cameras.iter().any(|c| (c.width, c.height) != (w, h)) {
+            return Err(invalid(
+                "cameras",
+                "all cameras of one call must share a size",
+            ));
+        }
+        let mut origins = Vec::with_capacity(cameras.len() * w * h);
+        let mut dirs = Vec::with_capacity(cameras.len() * w * h);
+        for camera in cameras {
+            let rays = Rays::from_camera(camera);
+            origins.extend_from_slice(rays.origins());
+            dirs.extend_from_slice(rays.dirs());
+        }
+        let rays = Rays::new(origins, dirs)?;
+        let device = raw.device().clone();
+        // The render op runs on the CPU; on another device the volume moves there and back.
+        let physical = self
+            .activation
+            .apply(&raw.squeeze(0)?)?
+            .to_device(&Device::Cpu)?;
+        let out = render(&physical, &rays, &self.config)?;
+        let views = cameras.len();
+        let rgb = out
+            .rgb
+            .reshape((views, h, w, 3))?
+            .permute((0, 3, 1, 2))?
+            .contiguous()?
+            .to_device(&device)?;
+        let depth = match out.depth {
+            Some(d) => Some(
+                (d.reshape((views, 1, h, w))? / f64::from(self.depth_norm))?.to_device(&device)?,
+            ),
+            None => None,
+        };
+        Ok((rgb, depth))
+    }
+
+    /// Renders and joins colour and depth into the critics' `(V, 4, h, w)` input (colour only,
+    /// `(V, 3, h, w)`, without depth).
+    pub fn render_joined(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<Tensor> {
+        let (rgb, depth) = self.render(raw, cameras)?;
+        Ok(match depth {
+            Some(d) => Tensor::cat(&[&rgb, &d], 1)?,
+            None => rgb,
+        })
+    }
+}

@@ -1,0 +1,111 @@
+//! Sampling new scenes from a trained pyramid: a physical radiance volume per scene, and
+//! renderings through the upsampler from chosen cameras.
+
+use std::path::Path;
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use glam::Vec3;
+use radiance_volume::{Aabb, RadianceVolume};
+use volrender::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
+
+use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
+use crate::error::{Error, Result};
+use crate::model::SinGrav;
+use crate::render::ViewRenderer;
+
+/// One generated scene.
+pub struct Sample {
+    /// The scene as a physical volume over `[-1, 1]^3` (sigma, r, g, b).
+    pub volume: RadianceVolume,
+    /// Its renderings `(V, 3, H, W)` at the final resolution (through G_N when it is trained).
+    pub views: Tensor,
+    /// Seconds to generate the volume (the 3D pyramid and the activation; no rendering).
+    pub generation_seconds: f64,
+}
+
+/// `count` cameras on the paper's radius at 35 degrees elevation, evenly spaced in azimuth,
+/// looking at the centre: fixed views for comparing samples.
+///
+/// ```
+/// let cams = singrav::sample::showcase_cameras(3, 32)?;
+/// assert_eq!(cams.len(), 3);
+/// assert!((cams[0].position().length() - volrender::PAPER_RADIUS).abs() < 1e-5);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn showcase_cameras(count: usize, size: usize) -> Result<Vec<Camera>> {
+    let elevation = 35f32.to_radians();
+    (0..count)
+        .map(|i| {
+            let azimuth = std::f32::consts::TAU * (i as f32 + 0.125) / count as f32;
+            let eye = PAPER_RADIUS
+                * Vec3::new(
+                    elevation.cos() * azimuth.cos(),
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                );
+            Ok(Camera::look_at(
+                eye,
+                Vec3::ZERO,
+                Vec3::Z,
+                size,
+                size,
+                PAPER_FOV_DEG.to_radians(),
+            )?)
+        })
+        .collect()
+}
+
+impl SinGrav {
+    /// Loads a trained pyramid from a run directory or checkpoint file, with its state (to
+    /// report, for example, whether training finished).
+    pub fn load(model: &Path, device: &Device) -> Result<(Self, TrainState)> {
+        let path = checkpoint_path(model);
+        let checkpoint = Checkpoint::load(&path, device)?;
+        let state = checkpoint.state;
+        if state.noise_amps.is_empty() {
+            return Err(Error::Checkpoint {
+                path,
+                why: "no scale has been trained yet".into(),
+            });
+        }
+        let model = Self::from_tensors(
+            &checkpoint.config,
+            &checkpoint.tensors,
+            &state.noise_amps,
+            state.upsampler && state.finished(&checkpoint.config),
+            device,
+        )
+        .map_err(|why| Error::Checkpoint { path, why })?;
+        Ok((model, state))
+    }
+
+    /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
+    /// last 3D scale's rendering; the upsampler doubles them when trained).
+    pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
+        let started = Instant::now();
+        let noise = self.draw_noise(self.volume_scales(), rng)?;
+        let raw = self.generate(&noise)?.detach();
+        let volume = RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &self.config().activation())?;
+        let generation_seconds = started.elapsed().as_secs_f64();
+        let last = self.volume_scales();
+        let renderer = ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false);
+        let refs: Vec<&Camera> = cameras.iter().collect();
+        let (coarse, _) = renderer.render(&raw, &refs)?;
+        let views = if self.has_upsampler() {
+            self.upsample_images(&coarse)?.clamp(0f32, 1f32)?
+        } else {
+            coarse
+        };
+        Ok(Sample {
+            volume,
+            views,
+            generation_seconds,
+        })
+    }
+
+    /// The rendering size the 3D pyramid produces (cameras for [`SinGrav::sample`] use it).
+    pub fn render_size(&self) -> usize {
+        self.config().image_sizes[self.volume_scales() - 1]
+    }
+}

@@ -1,0 +1,85 @@
+//! The patch critic of one scale and its WGAN-GP update.
+
+use std::collections::HashMap;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use patch_gan::{
+    critic_loss, gradient_penalty, GradientPenalty, PatchDiscriminator2d,
+    PatchDiscriminator2dConfig,
+};
+
+use crate::config::TrainConfig;
+use crate::error::{Error, Result};
+use crate::model::{copy_matching, named_vars, seeded_init};
+use crate::optim::Adam;
+
+/// A scale's critic, its variables and its optimiser.
+pub(super) struct Critic {
+    pub net: PatchDiscriminator2d,
+    pub vars: VarMap,
+    pub opt: Adam,
+}
+
+impl Critic {
+    /// A critic over `in_channels`, seeded from `rng`, then copied from `previous` (the last
+    /// scale's critic) where shapes agree.
+    pub fn new(
+        config: &TrainConfig,
+        in_channels: usize,
+        previous: Option<&HashMap<String, Tensor>>,
+        device: &Device,
+        rng: &mut impl rand::Rng,
+    ) -> Result<Self> {
+        let vars = VarMap::new();
+        let cfg = PatchDiscriminator2dConfig {
+            layers: config.layers,
+            channels: config.channels,
+            in_channels,
+        };
+        let net = PatchDiscriminator2d::new(&cfg, VarBuilder::from_varmap(&vars, DType::F32, device))?;
+        seeded_init(&vars, rng)?;
+        if let Some(previous) = previous {
+            copy_matching(previous, &vars)?;
+        }
+        let opt = Adam::new(named_vars(&vars), config.learning_rate, config.betas)?;
+        Ok(Self { net, vars, opt })
+    }
+
+    /// One critic step on a real and a fake batch (the fake detached); returns the critic loss
+    /// and the weighted penalty.
+    pub fn step(
+        &mut self,
+        real: &Tensor,
+        fake: &Tensor,
+        gp_weight: f64,
+        rng: &mut impl rand::Rng,
+    ) -> Result<(f32, f32)> {
+        let fake = fake.detach();
+        let loss = critic_loss(&self.net.score(real)?, &self.net.score(&fake)?)?;
+        let penalty = GradientPenalty {
+            weight: gp_weight,
+            ..GradientPenalty::default()
+        };
+        let gp = match gradient_penalty(&self.net, real, &fake, penalty, rng) {
+            Err(patch_gan::Error::SecondOrderDisabled) => {
+                return Err(Error::Invalid {
+                    what: "environment".into(),
+                    why: "training needs CANDLE_GRAD_DO_NOT_DETACH=1 set before the first \
+                          backward pass (the gradient penalty differentiates a gradient); the \
+                          volgen CLI sets it itself"
+                        .into(),
+                })
+            }
+            other => other?,
+        };
+        let total = (&loss + &gp)?;
+        self.opt.step(&total.backward()?)?;
+        Ok((loss.to_scalar::<f32>()?, gp.to_scalar::<f32>()?))
+    }
+
+    /// The generator's adversarial loss on a fake batch (differentiable).
+    pub fn generator_loss(&self, fake: &Tensor) -> Result<Tensor> {
+        Ok(patch_gan::generator_loss(&self.net.score(fake)?)?)
+    }
+}

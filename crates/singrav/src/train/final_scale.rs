@@ -1,0 +1,168 @@
+//! Training the last scale N: the 2D upsampler G_N doubles renderings of the frozen 3D pyramid,
+//! judged by the joint critic on `[G_N output, naive upsample]`, with the colour reconstruction
+//! and the sliced Wasserstein texture loss.
+
+use std::collections::HashMap;
+
+use candle_core::Tensor;
+use patch_gan::upsample_bilinear2x;
+use rand::Rng;
+use swd_loss::{PatchPyramid, PatchPyramidConfig, TextureLoss, TextureLossConfig};
+
+use super::critic::Critic;
+use super::run::Stage;
+use super::volume_scale::mse;
+use super::StepLosses;
+use crate::config::TrainConfig;
+use crate::dataset::DatasetLevel;
+use crate::error::Result;
+use crate::model::{named_vars, SinGrav};
+use crate::optim::Adam;
+use crate::render::ViewRenderer;
+
+/// Levels of the weights-free patch pyramid the SWD loss compares (see docs/training.md: the
+/// paper's VGG-19 features need downloaded weights).
+const SWD_LEVELS: usize = 3;
+
+/// The state of the last scale's training.
+pub(super) struct FinalScale<'a> {
+    model: &'a SinGrav,
+    config: &'a TrainConfig,
+    /// Dataset at the last 3D scale's resolution (the upsampler's input size).
+    coarse: DatasetLevel,
+    /// Dataset at the final resolution.
+    fine: DatasetLevel,
+    /// Real joint critic inputs `[x_N, up(x_{N-1})]`, `(V, 6, 2h, 2w)`.
+    real: Tensor,
+    /// Renderings of the frozen reconstruction V*_{N-1} from every view, `(V, 3, h, w)`.
+    reconstruction: Tensor,
+    renderer: ViewRenderer,
+    critic: Critic,
+    opt: Adam,
+    texture: Option<TextureLoss<PatchPyramid>>,
+}
+
+impl<'a> FinalScale<'a> {
+    /// Sets up scale N (the upsampler already pushed onto `model`).
+    pub fn new(
+        model: &'a SinGrav,
+        coarse: DatasetLevel,
+        fine: DatasetLevel,
+        previous_critic: Option<&HashMap<String, Tensor>>,
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
+        let config = model.config();
+        let last = config.volume_sizes.len();
+        let renderer = ViewRenderer::new(config, config.samples[last - 1], 1.0, false);
+        let real = Tensor::cat(&[&fine.images, &upsample_bilinear2x(&coarse.images)?], 1)?;
+        let critic = Critic::new(config, real.dim(1)?, previous_critic, model.device(), rng)?;
+        let vars = model
+            .upsampler_vars()
+            .ok_or_else(|| crate::error::invalid("scale", "the upsampler is not built"))?;
+        let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let frozen = model.generate(&model.reconstruction_noise(last)?)?.detach();
+        let cameras: Vec<_> = coarse.cameras.iter().collect();
+        let (reconstruction, _) = renderer.render(&frozen, &cameras)?;
+        let texture = if config.use_swd {
+            let pyramid = PatchPyramid::new(PatchPyramidConfig::default().with_levels(SWD_LEVELS))?;
+            Some(TextureLoss::new(pyramid, TextureLossConfig::default())?)
+        } else {
+            None
+        };
+        Ok(Self {
+            model,
+            config,
+            coarse,
+            fine,
+            real,
+            reconstruction,
+            renderer,
+            critic,
+            opt,
+            texture,
+        })
+    }
+
+    /// A rendering `(1, 3, h, w)` of a random volume of the frozen pyramid from view `view`.
+    fn fake_rendering(&self, view: usize, rng: &mut impl Rng) -> Result<Tensor> {
+        let noise = self.model.draw_noise(self.config.volume_sizes.len(), rng)?;
+        let volume = self.model.generate(&noise)?.detach();
+        Ok(self.renderer.render(&volume, &[&self.coarse.cameras[view]])?.0)
+    }
+
+    /// The joint critic input `[G_N(x), up(x)]`.
+    fn joint(&self, upsampled: &Tensor, coarse: &Tensor) -> Result<Tensor> {
+        Ok(Tensor::cat(&[upsampled, &upsample_bilinear2x(coarse)?], 1)?)
+    }
+}
+
+impl Stage for FinalScale<'_> {
+    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
+        let mut losses = StepLosses::default();
+        let views = self.coarse.cameras.len();
+        if adversarial {
+            let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
+            for _ in 0..self.config.d_steps {
+                let (real_view, fake_view) = (rng.random_range(0..views), rng.random_range(0..views));
+                let coarse = self.fake_rendering(fake_view, rng)?;
+                let fake = self.joint(&self.model.upsample_images(&coarse)?, &coarse)?;
+                let real = self.real.narrow(0, real_view, 1)?;
+                let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
+                critic_sum += c;
+                penalty_sum += p;
+            }
+            let steps = self.config.d_steps as f32;
+            losses.critic = Some(critic_sum / steps);
+            losses.penalty = Some(penalty_sum / steps);
+        }
+        let (mut adversarial_sum, mut color_sum, mut swd_sum) = (0.0, 0.0, 0.0);
+        for _ in 0..self.config.g_steps {
+            let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
+            if adversarial {
+                let fake_view = rng.random_range(0..views);
+                let coarse = self.fake_rendering(fake_view, rng)?;
+                let upsampled = self.model.upsample_images(&coarse)?;
+                let adv = self.critic.generator_loss(&self.joint(&upsampled, &coarse)?)?;
+                adversarial_sum += adv.to_scalar::<f32>()?;
+                total = (total + adv)?;
+                if let Some(texture) = &self.texture {
+                    let target = texture.target(&self.fine.images.narrow(0, fake_view, 1)?)?;
+                    let swd = (texture.loss(&upsampled, &target, rng)? * self.config.lambda_swd)?;
+                    swd_sum += swd.to_scalar::<f32>()?;
+                    total = (total + swd)?;
+                }
+            }
+            let view = rng.random_range(0..views);
+            let rebuilt = self
+                .model
+                .upsample_images(&self.reconstruction.narrow(0, view, 1)?)?;
+            let color = (mse(&rebuilt, &self.fine.images.narrow(0, view, 1)?)? * self.config.lambda_color)?;
+            color_sum += color.to_scalar::<f32>()?;
+            total = (total + color)?;
+            self.opt.step(&total.backward()?)?;
+        }
+        let steps = self.config.g_steps as f32;
+        losses.color = color_sum / steps;
+        losses.adversarial = adversarial.then_some(adversarial_sum / steps);
+        losses.swd = (adversarial && self.texture.is_some()).then_some(swd_sum / steps);
+        Ok(losses)
+    }
+
+    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>> {
+        let mut row = vec![
+            self.fine.images.get(0)?,
+            self.model
+                .upsample_images(&self.reconstruction.narrow(0, 0, 1)?)?
+                .get(0)?,
+        ];
+        for _ in 0..count {
+            let coarse = self.fake_rendering(0, rng)?;
+            row.push(self.model.upsample_images(&coarse)?.get(0)?);
+        }
+        Ok(vec![row])
+    }
+
+    fn parts(&mut self) -> (&mut Critic, &mut Adam) {
+        (&mut self.critic, &mut self.opt)
+    }
+}

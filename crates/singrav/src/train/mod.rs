@@ -1,0 +1,75 @@
+//! Coarse-to-fine training: each scale trains its generator (earlier scales frozen) against its
+//! patch critic, with the reconstruction loss on the fixed noise, SinGAN-style noise amplitudes,
+//! checkpoints per scale and every few minutes, a JSON-lines loss log and a picture of samples
+//! after each scale.
+
+mod critic;
+mod final_scale;
+mod log;
+mod run;
+mod volume_scale;
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+pub use run::{train, TrainOutcome};
+
+/// What an observer tells the trainer after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// Go on.
+    Continue,
+    /// Stop now, without writing anything further (as if the process were killed); the last
+    /// checkpoint stays as it is.
+    Stop,
+}
+
+/// The losses of one iteration (means over its steps); `None` where a term was not computed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StepLosses {
+    /// Critic loss `mean D(fake) - mean D(real)` (before the penalty).
+    pub critic: Option<f32>,
+    /// Gradient penalty (weighted).
+    pub penalty: Option<f32>,
+    /// Generator adversarial loss `-mean D(fake)`.
+    pub adversarial: Option<f32>,
+    /// Weighted colour reconstruction `lambda_c * mse`.
+    pub color: f32,
+    /// Weighted depth reconstruction `lambda_d * mse`.
+    pub depth: Option<f32>,
+    /// Weighted sliced Wasserstein texture loss (last scale).
+    pub swd: Option<f32>,
+}
+
+/// What just happened, for progress display.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// An iteration finished.
+    Step,
+    /// A checkpoint was written.
+    Checkpoint(PathBuf),
+    /// A scale finished; its picture of samples is at the path.
+    ScaleDone(PathBuf),
+}
+
+/// Progress reported to the observer.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    /// The scale in training (1-based).
+    pub scale: usize,
+    /// The number of scales N.
+    pub scales: usize,
+    /// Iterations done in this scale.
+    pub iteration: usize,
+    /// Iterations per scale.
+    pub iterations: usize,
+    /// The last iteration's losses.
+    pub losses: StepLosses,
+    /// Seconds spent in this scale so far.
+    pub scale_seconds: f64,
+    /// Seconds of training so far, over all scales (including before a resume).
+    pub total_seconds: f64,
+    /// What happened.
+    pub event: Event,
+}

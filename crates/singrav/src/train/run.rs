@@ -1,0 +1,365 @@
+//! The training loop over scales: set-up of each scale, iterations, checkpoints, resume.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+
+use super::critic::Critic;
+use super::final_scale::FinalScale;
+use super::log::LossLog;
+use super::volume_scale::{picture_path, reconstruction_rmse, VolumeScale};
+use super::{Control, Event, Progress, StepLosses};
+use crate::checkpoint::{write_config_json, Checkpoint, TrainState, CHECKPOINT_FILE, CONFIG_FILE};
+use crate::config::TrainConfig;
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+use crate::model::{load_into, var_tensors, SinGrav};
+use crate::noise::step_rng;
+use crate::optim::Adam;
+use crate::render::ViewRenderer;
+
+/// One scale's training, as the loop drives it.
+pub(super) trait Stage {
+    /// Runs one iteration (`d_steps` critic steps when `adversarial`, then `g_steps` generator
+    /// steps) drawing all randomness from `rng`.
+    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses>;
+    /// Rows of the scale's picture: real view, reconstruction, then `count` samples.
+    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>>;
+    /// The critic and the generator's optimiser (for checkpoints).
+    fn parts(&mut self) -> (&mut Critic, &mut Adam);
+}
+
+/// How a call to [`train`] ended.
+pub enum TrainOutcome {
+    /// Every scale is trained; the model is ready to sample.
+    Finished(Box<SinGrav>),
+    /// The observer asked to stop; the run directory holds the last checkpoint.
+    Stopped,
+}
+
+/// Samples shown in each scale's picture.
+const PICTURE_SAMPLES: usize = 4;
+/// Views used to measure a reconstruction's error for the next noise amplitude.
+const AMPLITUDE_VIEWS: usize = 8;
+/// Marks the RNG streams of a scale's set-up and picture (iterations use 0..iterations).
+const SETUP_STREAM: usize = usize::MAX;
+const PICTURE_STREAM: usize = usize::MAX - 1;
+
+/// Trains SinGRAV on `dataset`, writing checkpoints, the loss log, `config.json` and pictures
+/// into `run_dir`. With `resume`, continues from `run_dir`'s checkpoint (which must have been
+/// made with the same configuration) and ends with the same weights as an uninterrupted run.
+/// Without it, refuses a directory that already holds a checkpoint rather than overwrite it.
+///
+/// Training needs `CANDLE_GRAD_DO_NOT_DETACH=1` in the environment before the first backward
+/// pass (the gradient penalty differentiates a gradient); without it this returns an error.
+/// `observer` sees every iteration and may stop the run.
+pub fn train(
+    config: &TrainConfig,
+    dataset: &Dataset,
+    run_dir: &Path,
+    resume: bool,
+    device: &Device,
+    observer: &mut dyn FnMut(&Progress) -> Control,
+) -> Result<TrainOutcome> {
+    config.validate()?;
+    crate::io::create_dir(run_dir)?;
+    let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
+    let (mut model, mut state, saved) = if resume {
+        let checkpoint = Checkpoint::load(&checkpoint_file, device)?;
+        check_same_config(&checkpoint.config, config, &checkpoint_file)?;
+        let model = SinGrav::from_tensors(
+            config,
+            &checkpoint.tensors,
+            &checkpoint.state.noise_amps,
+            checkpoint.state.upsampler,
+            device,
+        )
+        .map_err(|why| Error::Checkpoint {
+            path: checkpoint_file.clone(),
+            why,
+        })?;
+        (model, checkpoint.state, checkpoint.tensors)
+    } else {
+        if checkpoint_file.exists() {
+            return Err(Error::Checkpoint {
+                path: checkpoint_file,
+                why: "this run directory already holds a checkpoint; resume it (--resume) or \
+                      choose another directory"
+                    .into(),
+            });
+        }
+        let model = SinGrav::new(config, device, &mut step_rng(config.seed, 0, SETUP_STREAM))?;
+        let state = TrainState {
+            scale: 1,
+            iteration: 0,
+            noise_amps: Vec::new(),
+            upsampler: false,
+            depth_norm: depth_norm(dataset),
+            optimizer_steps: (0, 0),
+            scale_seconds: Vec::new(),
+            current_seconds: 0.0,
+            scale_peak_mib: Vec::new(),
+        };
+        (model, state, HashMap::new())
+    };
+    write_config_json(config, &run_dir.join(CONFIG_FILE))?;
+    let mut log = LossLog::open(run_dir, resume.then_some((state.scale, state.iteration)))?;
+    // The critic the next scale starts from, and the tensors a mid-scale resume restores.
+    let mut previous_critic = prefixed(&saved, "d.");
+    let mut restore = (state.iteration > 0).then_some(&saved);
+    for n in state.scale..=config.scales() {
+        let mut setup = step_rng(config.seed, n, SETUP_STREAM);
+        let fresh = restore.is_none();
+        let previous = (!previous_critic.is_empty()).then_some(&previous_critic);
+        let mut stage: Box<dyn Stage + '_> = if n < config.scales() {
+            let size = config.image_sizes[n - 1];
+            let level = dataset.level(size, size, device)?;
+            if fresh {
+                let amp = noise_amplitude(&model, n, &level, state.depth_norm)?;
+                model.push_generator(amp, &mut setup)?;
+                state.noise_amps.push(amp);
+            }
+            Box::new(VolumeScale::new(&model, n, level, state.depth_norm, previous, &mut setup)?)
+        } else {
+            if fresh {
+                model.push_upsampler(&mut setup)?;
+                state.upsampler = true;
+            }
+            let size = *config.image_sizes.last().unwrap_or(&0);
+            let coarse = dataset.level(size, size, device)?;
+            let fine = dataset.level(2 * size, 2 * size, device)?;
+            Box::new(FinalScale::new(&model, coarse, fine, previous, &mut setup)?)
+        };
+        if let Some(tensors) = restore.take() {
+            restore_stage(stage.as_mut(), tensors, &state, &checkpoint_file, device)?;
+        }
+        let mut last_checkpoint = Instant::now();
+        while state.iteration < config.iterations {
+            let it = state.iteration;
+            let started = Instant::now();
+            let losses = stage.iteration(it >= config.reconstruction_only, &mut step_rng(config.seed, n, it))?;
+            check_finite(&losses, n, it)?;
+            state.current_seconds += started.elapsed().as_secs_f64();
+            state.iteration += 1;
+            log.append(n, it, total_seconds(&state), &losses)?;
+            let mut progress = Progress {
+                scale: n,
+                scales: config.scales(),
+                iteration: state.iteration,
+                iterations: config.iterations,
+                losses,
+                scale_seconds: state.current_seconds,
+                total_seconds: total_seconds(&state),
+                event: Event::Step,
+            };
+            if observer(&progress) == Control::Stop {
+                return Ok(TrainOutcome::Stopped);
+            }
+            let due_by_time = config.checkpoint_seconds > 0
+                && last_checkpoint.elapsed().as_secs() >= config.checkpoint_seconds;
+            let due_by_count = config.checkpoint_iterations > 0
+                && state.iteration % config.checkpoint_iterations == 0;
+            if state.iteration < config.iterations && (due_by_time || due_by_count) {
+                save(&checkpoint_file, config, &state, &model, Some(stage.as_mut()))?;
+                last_checkpoint = Instant::now();
+                progress.event = Event::Checkpoint(checkpoint_file.clone());
+                if observer(&progress) == Control::Stop {
+                    return Ok(TrainOutcome::Stopped);
+                }
+            }
+        }
+        let picture = picture_path(run_dir, n);
+        crate::io::create_dir(picture.parent().unwrap_or(run_dir))?;
+        let rows = stage.picture_rows(&mut step_rng(config.seed, n, PICTURE_STREAM), PICTURE_SAMPLES)?;
+        crate::picture::write_grid(&picture, &rows)?;
+        previous_critic = var_tensors(&stage.parts().0.vars);
+        drop(stage);
+        state.scale_seconds.push(state.current_seconds);
+        state.scale_peak_mib.push(peak_memory_mib());
+        state.current_seconds = 0.0;
+        state.scale = n + 1;
+        state.iteration = 0;
+        state.optimizer_steps = (0, 0);
+        save_boundary(&checkpoint_file, config, &state, &model, &previous_critic)?;
+        let progress = Progress {
+            scale: n,
+            scales: config.scales(),
+            iteration: config.iterations,
+            iterations: config.iterations,
+            losses: StepLosses::default(),
+            scale_seconds: *state.scale_seconds.last().unwrap_or(&0.0),
+            total_seconds: total_seconds(&state),
+            event: Event::ScaleDone(picture),
+        };
+        if observer(&progress) == Control::Stop {
+            return Ok(TrainOutcome::Stopped);
+        }
+    }
+    Ok(TrainOutcome::Finished(Box::new(model)))
+}
+
+/// Seconds of training over all scales, including before a resume.
+fn total_seconds(state: &TrainState) -> f64 {
+    state.scale_seconds.iter().sum::<f64>() + state.current_seconds
+}
+
+/// Depth is divided by the farthest a camera can see into the box: its distance from the
+/// centre plus the box's half diagonal, so normalised depth stays within [0, 1].
+fn depth_norm(dataset: &Dataset) -> f32 {
+    let farthest = dataset
+        .cameras()
+        .iter()
+        .map(|c| c.position().length())
+        .fold(0.0f32, f32::max);
+    farthest + 3f32.sqrt()
+}
+
+/// The noise amplitude of a new scale n: the first scale's is fixed; above, SinGAN's rule
+/// `factor * RMSE(render(up(V*_{n-1})), x_n)`.
+fn noise_amplitude(model: &SinGrav, n: usize, level: &crate::dataset::DatasetLevel, depth_norm: f32) -> Result<f64> {
+    let config = model.config();
+    if n == 1 {
+        return Ok(config.noise_amp_first);
+    }
+    let coarse = model.generate(&model.reconstruction_noise(n - 1)?)?.detach();
+    let up = model.upsample_to_scale(&coarse, n)?;
+    let renderer = ViewRenderer::new(config, config.samples[n - 1], depth_norm, false);
+    Ok(config.noise_amp_factor * reconstruction_rmse(&renderer, &up, level, AMPLITUDE_VIEWS)?)
+}
+
+fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
+    let terms = [
+        ("critic loss", losses.critic),
+        ("gradient penalty", losses.penalty),
+        ("adversarial loss", losses.adversarial),
+        ("colour reconstruction", Some(losses.color)),
+        ("depth reconstruction", losses.depth),
+        ("SWD loss", losses.swd),
+    ];
+    for (what, value) in terms {
+        if let Some(value) = value.filter(|v| !v.is_finite()) {
+            return Err(Error::Diverged {
+                scale,
+                step,
+                what,
+                value,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The tensors under `prefix`, with the prefix removed.
+fn prefixed(tensors: &HashMap<String, Tensor>, prefix: &str) -> HashMap<String, Tensor> {
+    tensors
+        .iter()
+        .filter_map(|(k, v)| Some((k.strip_prefix(prefix)?.to_string(), v.clone())))
+        .collect()
+}
+
+/// Saves a mid-scale checkpoint: weights, the critic, both optimisers.
+fn save(
+    path: &Path,
+    config: &TrainConfig,
+    state: &TrainState,
+    model: &SinGrav,
+    stage: Option<&mut dyn Stage>,
+) -> Result<()> {
+    let mut tensors = model.tensors();
+    let mut state = state.clone();
+    if let Some(stage) = stage {
+        let (critic, opt_g) = stage.parts();
+        for (name, t) in var_tensors(&critic.vars) {
+            tensors.insert(format!("d.{name}"), t);
+        }
+        let (g_state, g_steps) = opt_g.state("opt_g.");
+        let (d_state, d_steps) = critic.opt.state("opt_d.");
+        tensors.extend(g_state);
+        tensors.extend(d_state);
+        state.optimizer_steps = (g_steps, d_steps);
+    }
+    Checkpoint {
+        config: config.clone(),
+        state,
+        tensors,
+    }
+    .save(path)
+}
+
+/// Saves the checkpoint at the end of a scale: weights and the finished critic (the next
+/// scale's critic starts from it).
+fn save_boundary(
+    path: &Path,
+    config: &TrainConfig,
+    state: &TrainState,
+    model: &SinGrav,
+    critic: &HashMap<String, Tensor>,
+) -> Result<()> {
+    let mut tensors = model.tensors();
+    for (name, t) in critic {
+        tensors.insert(format!("d.{name}"), t.clone());
+    }
+    Checkpoint {
+        config: config.clone(),
+        state: state.clone(),
+        tensors,
+    }
+    .save(path)
+}
+
+/// Restores a mid-scale stage's critic and optimisers from a checkpoint.
+fn restore_stage(
+    stage: &mut dyn Stage,
+    tensors: &HashMap<String, Tensor>,
+    state: &TrainState,
+    path: &Path,
+    device: &Device,
+) -> Result<()> {
+    let fail = |why: String| Error::Checkpoint {
+        path: path.to_path_buf(),
+        why,
+    };
+    let (critic, opt_g) = stage.parts();
+    load_into(&critic.vars, tensors, "d.", device).map_err(fail)?;
+    let (g_steps, d_steps) = state.optimizer_steps;
+    opt_g.restore(tensors, "opt_g.", g_steps).map_err(fail)?;
+    critic.opt.restore(tensors, "opt_d.", d_steps).map_err(fail)?;
+    Ok(())
+}
+
+/// Errors unless a checkpoint's configuration equals the requested one, naming the fields that
+/// differ.
+fn check_same_config(saved: &TrainConfig, wanted: &TrainConfig, path: &Path) -> Result<()> {
+    if saved == wanted {
+        return Ok(());
+    }
+    let as_map = |c: &TrainConfig| serde_json::to_value(c).unwrap_or_default();
+    let (a, b) = (as_map(saved), as_map(wanted));
+    let differing: Vec<String> = a
+        .as_object()
+        .map(|fields| {
+            fields
+                .iter()
+                .filter(|(k, v)| b.get(k.as_str()) != Some(v))
+                .map(|(k, v)| format!("{k} (checkpoint {v}, requested {})", b.get(k.as_str()).cloned().unwrap_or_default()))
+                .collect()
+        })
+        .unwrap_or_default();
+    Err(Error::Checkpoint {
+        path: path.to_path_buf(),
+        why: format!(
+            "it was made with another configuration; differing: {}",
+            differing.join(", ")
+        ),
+    })
+}
+
+/// The process's peak resident memory in MiB (Linux `VmHWM`), if the OS reports it.
+fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}

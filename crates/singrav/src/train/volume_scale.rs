@@ -1,0 +1,208 @@
+//! Training one 3D scale n < N: G_n against the depth-conditioned critic D_n, with the
+//! reconstruction of the dataset views from the fixed noise.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{Tensor, D};
+use rand::Rng;
+
+use super::critic::Critic;
+use super::run::Stage;
+use super::StepLosses;
+use crate::config::TrainConfig;
+use crate::dataset::DatasetLevel;
+use crate::error::Result;
+use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
+use crate::optim::Adam;
+use crate::render::ViewRenderer;
+
+/// The state of one 3D scale's training.
+pub(super) struct VolumeScale<'a> {
+    model: &'a SinGrav,
+    config: &'a TrainConfig,
+    /// The scale, 1-based.
+    n: usize,
+    level: DatasetLevel,
+    /// Real critic inputs: colour and normalised depth `(V, 4, h, w)` (colour only without depth).
+    real: Tensor,
+    renderer: ViewRenderer,
+    critic: Critic,
+    opt: Adam,
+    /// The frozen reconstruction V*_{n-1} (raw), for n >= 2.
+    prev_reconstruction: Option<Tensor>,
+}
+
+/// Mean squared error of two equally shaped tensors.
+pub(super) fn mse(a: &Tensor, b: &Tensor) -> Result<Tensor> {
+    Ok((a - b)?.sqr()?.mean_all()?)
+}
+
+impl<'a> VolumeScale<'a> {
+    /// Sets up scale `n` (its generator already pushed onto `model`).
+    pub fn new(
+        model: &'a SinGrav,
+        n: usize,
+        level: DatasetLevel,
+        depth_norm: f32,
+        previous_critic: Option<&HashMap<String, Tensor>>,
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
+        let config = model.config();
+        let renderer = ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth);
+        let real = if config.use_depth {
+            Tensor::cat(&[&level.images, &(&level.depths / f64::from(depth_norm))?], 1)?
+        } else {
+            level.images.clone()
+        };
+        let in_channels = real.dim(1)?;
+        let critic = Critic::new(config, in_channels, previous_critic, model.device(), rng)?;
+        let vars = model
+            .generator_vars(n)
+            .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
+        let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let prev_reconstruction = if n >= 2 {
+            Some(model.generate(&model.reconstruction_noise(n - 1)?)?.detach())
+        } else {
+            None
+        };
+        Ok(Self {
+            model,
+            config,
+            n,
+            level,
+            real,
+            renderer,
+            critic,
+            opt,
+            prev_reconstruction,
+        })
+    }
+
+    /// A random volume of this scale: fresh noise at every scale, coarser scales frozen.
+    fn fake_volume(&self, rng: &mut impl Rng) -> Result<Tensor> {
+        let noise = self.model.draw_noise(self.n, rng)?;
+        match &noise[..] {
+            [z] => self.model.coarsest(z),
+            [coarser @ .., z] => {
+                let prev = self.model.generate(coarser)?.detach();
+                self.model.refine(self.n, z, &prev)
+            }
+            [] => Err(crate::error::invalid("scale", "no 3D scale to generate")),
+        }
+    }
+
+    /// The reconstruction V*_n from {z*_1, 0, ...}, differentiable in G_n only.
+    fn reconstruction(&self) -> Result<Tensor> {
+        match &self.prev_reconstruction {
+            None => self.model.coarsest(self.model.z_star()),
+            Some(prev) => {
+                let size = self.config.volume_sizes[self.n - 1];
+                let zero = Tensor::zeros(
+                    (1, VOLUME_CHANNELS, size, size, size),
+                    candle_core::DType::F32,
+                    self.model.device(),
+                )?;
+                self.model.refine(self.n, &zero, prev)
+            }
+        }
+    }
+
+    fn views(&self) -> usize {
+        self.level.cameras.len()
+    }
+}
+
+impl Stage for VolumeScale<'_> {
+    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
+        let mut losses = StepLosses::default();
+        let views = self.views();
+        if adversarial {
+            let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
+            for _ in 0..self.config.d_steps {
+                let fake_volume = self.fake_volume(rng)?.detach();
+                let (real_view, fake_view) = (rng.random_range(0..views), rng.random_range(0..views));
+                let real = self.real.narrow(0, real_view, 1)?;
+                let fake = self
+                    .renderer
+                    .render_joined(&fake_volume, &[&self.level.cameras[fake_view]])?;
+                let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
+                critic_sum += c;
+                penalty_sum += p;
+            }
+            let steps = self.config.d_steps as f32;
+            losses.critic = Some(critic_sum / steps);
+            losses.penalty = Some(penalty_sum / steps);
+        }
+        let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
+        for _ in 0..self.config.g_steps {
+            let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
+            if adversarial {
+                let fake_view = rng.random_range(0..views);
+                let fake = self
+                    .renderer
+                    .render_joined(&self.fake_volume(rng)?, &[&self.level.cameras[fake_view]])?;
+                let adv = self.critic.generator_loss(&fake)?;
+                adversarial_sum += adv.to_scalar::<f32>()?;
+                total = (total + adv)?;
+            }
+            let view = rng.random_range(0..views);
+            let (rgb, depth) = self
+                .renderer
+                .render(&self.reconstruction()?, &[&self.level.cameras[view]])?;
+            let color = (mse(&rgb, &self.level.images.narrow(0, view, 1)?)? * self.config.lambda_color)?;
+            color_sum += color.to_scalar::<f32>()?;
+            total = (total + color)?;
+            if let Some(depth) = depth {
+                let real_depth = self.real.narrow(0, view, 1)?.narrow(1, 3, 1)?;
+                let depth = (mse(&depth, &real_depth)? * self.config.lambda_depth)?;
+                depth_sum += depth.to_scalar::<f32>()?;
+                total = (total + depth)?;
+            }
+            self.opt.step(&total.backward()?)?;
+        }
+        let steps = self.config.g_steps as f32;
+        losses.color = color_sum / steps;
+        losses.depth = self.config.use_depth.then_some(depth_sum / steps);
+        losses.adversarial = adversarial.then_some(adversarial_sum / steps);
+        Ok(losses)
+    }
+
+    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>> {
+        let camera = [&self.level.cameras[0]];
+        let mut row = vec![
+            self.level.images.get(0)?,
+            self.renderer.render(&self.reconstruction()?.detach(), &camera)?.0.get(0)?,
+        ];
+        for _ in 0..count {
+            row.push(self.renderer.render(&self.fake_volume(rng)?.detach(), &camera)?.0.get(0)?);
+        }
+        Ok(vec![row])
+    }
+
+    fn parts(&mut self) -> (&mut Critic, &mut Adam) {
+        (&mut self.critic, &mut self.opt)
+    }
+}
+
+/// The RMSE between renderings of `volume` and the level's images over up to `max_views`
+/// views: SinGAN sets a scale's noise amplitude from the error of the upsampled coarser
+/// reconstruction.
+pub(super) fn reconstruction_rmse(
+    renderer: &ViewRenderer,
+    volume: &Tensor,
+    level: &DatasetLevel,
+    max_views: usize,
+) -> Result<f64> {
+    let views = level.cameras.len().min(max_views);
+    let cameras: Vec<_> = level.cameras.iter().take(views).collect();
+    let (rgb, _) = renderer.render(volume, &cameras)?;
+    let real = level.images.narrow(0, 0, views)?;
+    let mse = (rgb - real)?.sqr()?.mean(D::Minus1)?.mean_all()?;
+    Ok(f64::from(mse.to_scalar::<f32>()?).sqrt())
+}
+
+/// Where a picture of a scale's samples goes.
+pub(super) fn picture_path(run_dir: &Path, scale: usize) -> std::path::PathBuf {
+    run_dir.join("samples").join(format!("scale_{scale}.png"))
+}

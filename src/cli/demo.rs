@@ -1,0 +1,217 @@
+//! `volgen demo`: the whole pipeline in one command. Builds the default scene's dataset, trains
+//! the `tiny` preset, samples four scenes, and writes pictures (input views beside generated
+//! ones), VDB files and a summary to `./out/demo`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::dataset::{write_dataset, DatasetSpec};
+use singrav::scenes::SceneKind;
+use singrav::SinGrav;
+
+use super::sample::{sample_to_dir, Outputs};
+use super::train::{load_dataset, train_with_progress, TrainOptions};
+
+/// Arguments of `volgen demo`.
+#[derive(Debug, clap::Args)]
+pub struct DemoArgs {
+    /// Output directory.
+    #[arg(long, value_name = "DIR", default_value = "out/demo")]
+    out: PathBuf,
+    /// The built-in scene to learn: stones, mushrooms or islands.
+    #[arg(long, default_value = "stones")]
+    scene: SceneKind,
+    /// Scenes to generate.
+    #[arg(long, default_value_t = 4)]
+    count: usize,
+    /// Views in the dataset.
+    #[arg(long, default_value_t = 100)]
+    views: usize,
+    #[command(flatten)]
+    train: TrainOptions,
+}
+
+/// The summary written to `summary.json` (and, readably, `summary.md`).
+#[derive(Debug, Serialize)]
+struct Summary {
+    scene: String,
+    preset: String,
+    dataset_seconds: f64,
+    training_seconds: f64,
+    scale_seconds: Vec<f64>,
+    scale_peak_mib: Vec<Option<f64>>,
+    final_losses: Vec<serde_json::Value>,
+    generation_seconds: Vec<f64>,
+    overview: PathBuf,
+    dataset: PathBuf,
+    model: PathBuf,
+    samples: PathBuf,
+    scale_pictures: Vec<PathBuf>,
+}
+
+/// Runs the demo.
+pub fn run(args: &DemoArgs) -> Result<()> {
+    let config = args.train.config()?;
+    let dataset_dir = args.out.join("dataset");
+    let run_dir = args.out.join("run");
+    let samples_dir = args.out.join("samples");
+
+    let started = Instant::now();
+    let resolution = config.final_image_size().max(128);
+    let spec = DatasetSpec {
+        views: args.views,
+        resolution,
+        seed: args.train.seed,
+        ..DatasetSpec::default()
+    };
+    println!(
+        "1/3 rendering the `{}` scene: {} views at {resolution}^2 -> {}",
+        args.scene.name(),
+        spec.views,
+        dataset_dir.display()
+    );
+    let scene = args.scene.build(args.train.seed);
+    write_dataset(scene.as_ref(), &dataset_dir, &spec)
+        .with_context(|| format!("writing the dataset to {}", dataset_dir.display()))?;
+    let dataset_seconds = started.elapsed().as_secs_f64();
+    let dataset = load_dataset(&dataset_dir, &config)?;
+
+    // A run left by an earlier demo with the same settings is continued, not overwritten.
+    let resume = args.train.resume || run_dir.join(CHECKPOINT_FILE).exists();
+    println!(
+        "2/3 training the `{}` preset ({} scales x {} iterations){} -> {}",
+        config.preset,
+        config.scales(),
+        config.iterations,
+        if resume { ", resuming" } else { "" },
+        run_dir.display()
+    );
+    let model = train_with_progress(&config, &dataset, &run_dir, resume)?;
+    let state = Checkpoint::load(&run_dir.join(CHECKPOINT_FILE), model.device())?.state;
+
+    println!(
+        "3/3 sampling {} scenes -> {}",
+        args.count,
+        samples_dir.display()
+    );
+    let input_views = 3.min(dataset.len());
+    let size = model.render_size();
+    let cameras = dataset.level(size, size, model.device())?.cameras[..input_views].to_vec();
+    let outputs = Outputs {
+        vdb: cfg!(feature = "vdb"),
+        exr_slices: false,
+    };
+    let samples = sample_to_dir(&model, &cameras, args.count, args.train.seed, &samples_dir, outputs)?;
+    let overview = args.out.join("overview.png");
+    write_overview(&overview, &model, &dataset, input_views, &samples)?;
+
+    let summary = Summary {
+        scene: args.scene.name().into(),
+        preset: config.preset.clone(),
+        dataset_seconds,
+        training_seconds: state.scale_seconds.iter().sum(),
+        scale_seconds: state.scale_seconds.clone(),
+        scale_peak_mib: state.scale_peak_mib.clone(),
+        final_losses: last_losses_per_scale(&run_dir)?,
+        generation_seconds: samples.iter().map(|s| s.generation_seconds).collect(),
+        overview: overview.clone(),
+        dataset: dataset_dir,
+        model: run_dir.clone(),
+        samples: samples_dir,
+        scale_pictures: (1..=config.scales())
+            .map(|n| run_dir.join("samples").join(format!("scale_{n}.png")))
+            .collect(),
+    };
+    write_summary(&args.out, &summary)?;
+    println!("done: overview {} (top row: input views; below: generated scenes)", overview.display());
+    println!("      summary  {}", args.out.join("summary.md").display());
+    println!("      volumes  {}", summary.samples.display());
+    Ok(())
+}
+
+/// Input views in the top row, each generated scene from the same cameras below.
+fn write_overview(
+    path: &Path,
+    model: &SinGrav,
+    dataset: &singrav::dataset::Dataset,
+    views: usize,
+    samples: &[singrav::sample::Sample],
+) -> Result<()> {
+    let size = samples
+        .first()
+        .map(|s| s.views.dim(3))
+        .transpose()?
+        .unwrap_or(model.render_size());
+    let level = dataset.level(size, size, model.device())?;
+    let mut rows = vec![(0..views)
+        .map(|v| level.images.get(v))
+        .collect::<candle_core::Result<Vec<_>>>()?];
+    for sample in samples {
+        rows.push(
+            (0..views)
+                .map(|v| sample.views.get(v))
+                .collect::<candle_core::Result<Vec<_>>>()?,
+        );
+    }
+    singrav::picture::write_grid(path, &rows)?;
+    Ok(())
+}
+
+/// The last logged losses of every scale.
+fn last_losses_per_scale(run_dir: &Path) -> Result<Vec<serde_json::Value>> {
+    let path = run_dir.join("log.jsonl");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut last: Vec<serde_json::Value> = Vec::new();
+    for line in text.lines() {
+        let value: serde_json::Value =
+            serde_json::from_str(line).with_context(|| format!("parsing {}", path.display()))?;
+        let scale = value.get("scale").and_then(serde_json::Value::as_u64).unwrap_or(0);
+        match last.last_mut() {
+            Some(prev) if prev.get("scale").and_then(serde_json::Value::as_u64) == Some(scale) => {
+                *prev = value;
+            }
+            _ => last.push(value),
+        }
+    }
+    Ok(last)
+}
+
+/// Writes summary.json and summary.md.
+fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
+    write_text(&dir.join("summary.json"), &serde_json::to_string_pretty(summary)?)?;
+    let mut md = String::new();
+    writeln!(md, "# volgen demo: `{}` scene, `{}` preset\n", summary.scene, summary.preset)?;
+    writeln!(md, "- dataset: {} ({:.0} s)", summary.dataset.display(), summary.dataset_seconds)?;
+    writeln!(md, "- model: {} (training {:.0} s)", summary.model.display(), summary.training_seconds)?;
+    writeln!(md, "- overview: {}", summary.overview.display())?;
+    writeln!(md, "- generated volumes: {}\n", summary.samples.display())?;
+    writeln!(md, "| scale | seconds | peak MiB | last losses |\n|---|---|---|---|")?;
+    for (i, seconds) in summary.scale_seconds.iter().enumerate() {
+        let mib = summary.scale_peak_mib.get(i).copied().flatten();
+        let losses = summary.final_losses.get(i).map(ToString::to_string).unwrap_or_default();
+        writeln!(
+            md,
+            "| {} | {seconds:.0} | {} | `{losses}` |",
+            i + 1,
+            mib.map(|m| format!("{m:.0}")).unwrap_or_else(|| "n/a".into())
+        )?;
+    }
+    let times: Vec<String> = summary.generation_seconds.iter().map(|s| format!("{s:.3}")).collect();
+    writeln!(md, "\nGeneration time per scene (s): {}", times.join(", "))?;
+    write_text(&dir.join("summary.md"), &md)
+}
+
+/// Writes a text file atomically.
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    radiance_volume::io::write_atomic(path, |w| {
+        std::io::Write::write_all(w, text.as_bytes()).map_err(|source| radiance_volume::Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    })?;
+    Ok(())
+}

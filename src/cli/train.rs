@@ -1,0 +1,158 @@
+//! `volgen train DATASET --out RUN [--preset tiny] [--resume]`: train SinGRAV on a
+//! `transforms.json` RGB-D dataset, with a progress bar, a JSON-lines log and checkpoints.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use singrav::dataset::Dataset;
+use singrav::train::{train, Control, Event, Progress, StepLosses, TrainOutcome};
+use singrav::{SinGrav, TrainConfig};
+
+/// Arguments of `volgen train`.
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// The dataset: a transforms.json or the directory holding it.
+    dataset: PathBuf,
+    /// The run directory (checkpoint, config.json, log.jsonl, samples/).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    #[command(flatten)]
+    options: TrainOptions,
+}
+
+/// Training settings shared by `train` and `demo`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TrainOptions {
+    /// Preset: paper (GPU), small, tiny (about ten minutes on 2 cores) or micro (seconds).
+    #[arg(long, default_value = "tiny")]
+    pub preset: String,
+    /// Continue a killed run from its last checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Ablation: the number of scales N (keeps the coarsest N - 1 3D scales).
+    #[arg(long, value_name = "N")]
+    pub scales: Option<usize>,
+    /// Ablation: train without the SWD loss at the last scale.
+    #[arg(long)]
+    pub no_swd: bool,
+    /// Ablation: train without the CSG grid at the coarsest scale.
+    #[arg(long)]
+    pub no_csg: bool,
+    /// Ablation: train without depth supervision.
+    #[arg(long)]
+    pub no_depth: bool,
+    /// Iterations per scale (default: the preset's).
+    #[arg(long, value_name = "N")]
+    pub iterations: Option<usize>,
+    /// Seed of every random draw.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+impl TrainOptions {
+    /// The configuration these options describe.
+    pub fn config(&self) -> Result<TrainConfig> {
+        let mut config = TrainConfig::preset(&self.preset)?;
+        if let Some(scales) = self.scales {
+            config = config.with_scales(scales)?;
+        }
+        if let Some(iterations) = self.iterations {
+            config.iterations = iterations;
+            config.reconstruction_only = iterations / 4;
+        }
+        config.use_swd &= !self.no_swd;
+        config.use_csg &= !self.no_csg;
+        config.use_depth &= !self.no_depth;
+        config.seed = self.seed;
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// Trains as the arguments say.
+pub fn run(args: &TrainArgs) -> Result<()> {
+    let config = args.options.config()?;
+    let dataset = load_dataset(&args.dataset, &config)?;
+    train_with_progress(&config, &dataset, &args.out, args.options.resume)?;
+    println!("trained model: {}", args.out.display());
+    Ok(())
+}
+
+/// Loads and checks a dataset for training with `config`.
+pub fn load_dataset(path: &Path, config: &TrainConfig) -> Result<Dataset> {
+    Dataset::load(path, config.background)
+        .with_context(|| format!("loading the dataset {}", path.display()))
+}
+
+/// Trains with a progress bar (scale, step, losses, time left) and a line per scale.
+pub fn train_with_progress(
+    config: &TrainConfig,
+    dataset: &Dataset,
+    run_dir: &Path,
+    resume: bool,
+) -> Result<Box<SinGrav>> {
+    let total = (config.scales() * config.iterations) as u64;
+    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:28}] {pos}/{len} {msg} | left ~{eta}",
+        )
+        .context("progress bar template")?
+        .progress_chars("=> "),
+    );
+    let mut observer = |p: &Progress| {
+        bar.set_position(((p.scale - 1) * p.iterations + p.iteration) as u64);
+        match &p.event {
+            Event::Step => bar.set_message(format!(
+                "scale {}/{} step {}/{} {}",
+                p.scale,
+                p.scales,
+                p.iteration,
+                p.iterations,
+                format_losses(&p.losses)
+            )),
+            Event::Checkpoint(_) => {}
+            Event::ScaleDone(picture) => bar.println(format!(
+                "scale {}/{} done in {:.0} s; samples: {}",
+                p.scale,
+                p.scales,
+                p.scale_seconds,
+                picture.display()
+            )),
+        }
+        Control::Continue
+    };
+    let outcome = train(
+        config,
+        dataset,
+        run_dir,
+        resume,
+        &candle_core::Device::Cpu,
+        &mut observer,
+    )
+    .with_context(|| format!("training into {}", run_dir.display()))?;
+    bar.finish_and_clear();
+    match outcome {
+        TrainOutcome::Finished(model) => Ok(model),
+        TrainOutcome::Stopped => anyhow::bail!("training stopped before the last scale"),
+    }
+}
+
+/// The losses of a step, compactly.
+fn format_losses(l: &StepLosses) -> String {
+    let mut parts = vec![format!("rec {:.4}", l.color)];
+    let optional = [
+        ("depth", l.depth),
+        ("D", l.critic),
+        ("gp", l.penalty),
+        ("adv", l.adversarial),
+        ("swd", l.swd),
+    ];
+    for (name, value) in optional {
+        if let Some(v) = value {
+            parts.push(format!("{name} {v:.3}"));
+        }
+    }
+    parts.join(" ")
+}
