@@ -20,9 +20,19 @@ use crate::model::{named_vars, SinGrav};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
 
-/// Levels of the weights-free patch pyramid the SWD loss compares (see docs/training.md: the
-/// paper's VGG-19 features need downloaded weights).
+/// The most levels of the weights-free patch pyramid the SWD loss compares (see
+/// docs/training.md: the paper's VGG-19 features need downloaded weights).
 const SWD_LEVELS: usize = 3;
+
+/// Pyramid levels for `size`-pixel images: as many as keep the coarsest level at least one
+/// patch wide, at most [`SWD_LEVELS`].
+fn swd_levels(size: usize, patch: usize) -> usize {
+    let mut levels = 1;
+    while levels < SWD_LEVELS && (size >> levels) >= patch {
+        levels += 1;
+    }
+    levels
+}
 
 /// The state of the last scale's training.
 pub(super) struct FinalScale<'a> {
@@ -64,7 +74,9 @@ impl<'a> FinalScale<'a> {
         let cameras: Vec<_> = coarse.cameras.iter().collect();
         let (reconstruction, _) = renderer.render(&frozen, &cameras)?;
         let texture = if config.use_swd {
-            let pyramid = PatchPyramid::new(PatchPyramidConfig::default().with_levels(SWD_LEVELS))?;
+            let defaults = PatchPyramidConfig::default();
+            let levels = swd_levels(config.final_image_size(), defaults.patch);
+            let pyramid = PatchPyramid::new(defaults.with_levels(levels))?;
             Some(TextureLoss::new(pyramid, TextureLossConfig::default())?)
         } else {
             None

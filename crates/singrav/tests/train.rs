@@ -1,0 +1,227 @@
+//! Training with the `micro` preset: finite losses, falling reconstruction, reproducibility,
+//! and a killed-then-resumed run ending with the same weights as an uninterrupted one.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use rand::SeedableRng;
+use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+use singrav::scenes::StandingStones;
+use singrav::train::{train, Control, Event, Progress, StepLosses, TrainOutcome};
+use singrav::{Error, SinGrav, TrainConfig};
+
+/// A small dataset of the stones scene at the micro preset's final resolution.
+fn dataset(dir: &Path) -> Dataset {
+    let spec = DatasetSpec {
+        views: 6,
+        resolution: 36,
+        grid: 32,
+        seed: 3,
+    };
+    write_dataset(&StandingStones::new(1), dir, &spec).unwrap();
+    Dataset::load(dir, [1.0; 3]).unwrap()
+}
+
+fn micro() -> TrainConfig {
+    std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
+    TrainConfig::preset("micro").unwrap()
+}
+
+/// Trains to the end, collecting every step's losses.
+fn run_to_end(config: &TrainConfig, data: &Dataset, dir: &Path) -> (SinGrav, Vec<(usize, StepLosses)>) {
+    let mut steps = Vec::new();
+    let mut observer = |p: &Progress| {
+        if p.event == Event::Step {
+            steps.push((p.scale, p.losses));
+        }
+        Control::Continue
+    };
+    match train(config, data, dir, false, &Device::Cpu, &mut observer).unwrap() {
+        TrainOutcome::Finished(model) => (*model, steps),
+        TrainOutcome::Stopped => panic!("nobody asked to stop"),
+    }
+}
+
+fn checkpoint_tensors(dir: &Path) -> HashMap<String, Tensor> {
+    Checkpoint::load(&dir.join(CHECKPOINT_FILE), &Device::Cpu)
+        .unwrap()
+        .tensors
+}
+
+fn assert_same_tensors(a: &HashMap<String, Tensor>, b: &HashMap<String, Tensor>) {
+    let mut names: Vec<_> = a.keys().collect();
+    names.sort();
+    let mut other: Vec<_> = b.keys().collect();
+    other.sort();
+    assert_eq!(names, other);
+    for name in names {
+        let x: Vec<f32> = a[name].flatten_all().unwrap().to_vec1().unwrap();
+        let y: Vec<f32> = b[name].flatten_all().unwrap().to_vec1().unwrap();
+        assert!(
+            x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()),
+            "tensor {name} differs"
+        );
+    }
+}
+
+#[test]
+fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = micro();
+    let run = tmp.path().join("run");
+    let (model, steps) = run_to_end(&config, &data, &run);
+    assert_eq!(steps.len(), config.scales() * config.iterations);
+    for (scale, l) in &steps {
+        let terms = [l.critic, l.penalty, l.adversarial, Some(l.color), l.depth, l.swd];
+        assert!(terms.iter().flatten().all(|v| v.is_finite()), "scale {scale}: {l:?}");
+    }
+    // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
+    assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));
+    assert!(steps.iter().all(|(s, l)| *s == 3 || l.swd.is_none()));
+    for n in 1..=config.scales() {
+        let png = image::open(run.join("samples").join(format!("scale_{n}.png"))).unwrap();
+        assert!(png.width() > png.height());
+    }
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), steps.len());
+
+    let cams = singrav::sample::showcase_cameras(2, model.render_size()).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let sample = model.sample(&mut rng, &cams).unwrap();
+    let size = config.volume_sizes[1];
+    assert_eq!(sample.volume.tensor().dims(), &[4, size, size, size]);
+    assert_eq!(sample.views.dims(), &[2, 3, config.final_image_size(), config.final_image_size()]);
+    let (loaded, state) = SinGrav::load(&run, &Device::Cpu).unwrap();
+    assert!(state.finished(&config));
+    let again = loaded
+        .sample(&mut rand_chacha::ChaCha8Rng::seed_from_u64(5), &cams)
+        .unwrap();
+    let a: Vec<f32> = sample.volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    let b: Vec<f32> = again.volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(a, b, "a loaded model samples what the trained one does");
+}
+
+#[test]
+fn reconstruction_loss_falls() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = TrainConfig {
+        iterations: 16,
+        reconstruction_only: 16,
+        g_steps: 2,
+        ..micro()
+    }
+    .with_scales(2)
+    .unwrap();
+    let (_, steps) = run_to_end(&config, &data, &tmp.path().join("run"));
+    let colour: Vec<f32> = steps.iter().filter(|(s, _)| *s == 1).map(|(_, l)| l.color).collect();
+    let depth: Vec<f32> = steps.iter().filter(|(s, _)| *s == 1).map(|(_, l)| l.depth.unwrap()).collect();
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    assert!(mean(&colour[12..]) < 0.8 * mean(&colour[..4]), "colour {colour:?}");
+    assert!(mean(&depth[12..]) < 0.8 * mean(&depth[..4]), "depth {depth:?}");
+}
+
+#[test]
+fn same_seed_same_weights_other_seed_other_weights() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = micro().with_scales(2).unwrap();
+    run_to_end(&config, &data, &tmp.path().join("a"));
+    run_to_end(&config, &data, &tmp.path().join("b"));
+    let a = checkpoint_tensors(&tmp.path().join("a"));
+    assert_same_tensors(&a, &checkpoint_tensors(&tmp.path().join("b")));
+    let other = TrainConfig { seed: 9, ..config };
+    run_to_end(&other, &data, &tmp.path().join("c"));
+    let c = checkpoint_tensors(&tmp.path().join("c"));
+    let differs = |name: &str| {
+        let x: Vec<f32> = a[name].flatten_all().unwrap().to_vec1().unwrap();
+        let y: Vec<f32> = c[name].flatten_all().unwrap().to_vec1().unwrap();
+        x != y
+    };
+    assert!(differs("z_star") && differs("g1.tail.weight"));
+}
+
+#[test]
+fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = TrainConfig {
+        checkpoint_iterations: 2,
+        ..micro()
+    };
+    run_to_end(&config, &data, &tmp.path().join("whole"));
+
+    // Killed in scale 2 after iteration 3: the last checkpoint is from iteration 2.
+    let killed = tmp.path().join("killed");
+    let mut stop = |p: &Progress| {
+        if p.scale == 2 && p.iteration == 3 {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    };
+    let outcome = train(&config, &data, &killed, false, &Device::Cpu, &mut stop).unwrap();
+    assert!(matches!(outcome, TrainOutcome::Stopped));
+    let state = Checkpoint::load(&killed.join(CHECKPOINT_FILE), &Device::Cpu).unwrap().state;
+    assert_eq!((state.scale, state.iteration), (2, 2));
+
+    // Without --resume the run directory is refused rather than overwritten.
+    let err = train(&config, &data, &killed, false, &Device::Cpu, &mut |_| Control::Continue);
+    assert!(matches!(err, Err(Error::Checkpoint { .. })));
+
+    let resumed = train(&config, &data, &killed, true, &Device::Cpu, &mut |_| Control::Continue).unwrap();
+    assert!(matches!(resumed, TrainOutcome::Finished(_)));
+    assert_same_tensors(
+        &checkpoint_tensors(&tmp.path().join("whole")),
+        &checkpoint_tensors(&killed),
+    );
+    // The resumed log reads as one run: every (scale, iteration) once.
+    let log = std::fs::read_to_string(killed.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), config.scales() * config.iterations);
+}
+
+#[test]
+fn resume_refuses_another_configuration_and_names_the_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = micro().with_scales(2).unwrap();
+    let run = tmp.path().join("run");
+    run_to_end(&config, &data, &run);
+    let other = TrainConfig {
+        lambda_depth: 1.0,
+        ..config
+    };
+    let err = train(&other, &data, &run, true, &Device::Cpu, &mut |_| Control::Continue)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("lambda_depth") && err.contains(CHECKPOINT_FILE), "{err}");
+
+    let missing = train(&other, &data, &tmp.path().join("empty"), true, &Device::Cpu, &mut |_| Control::Continue)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(missing.contains("no checkpoint"), "{missing}");
+}
+
+#[test]
+fn broken_checkpoint_is_a_clear_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join(CHECKPOINT_FILE);
+    std::fs::write(&path, b"not a checkpoint").unwrap();
+    let err = SinGrav::load(tmp.path(), &Device::Cpu).err().unwrap().to_string();
+    assert!(err.contains(CHECKPOINT_FILE) && err.contains("safetensors"), "{err}");
+}
+
+#[test]
+fn presets_validate_and_unknown_names_are_listed() {
+    for name in TrainConfig::PRESETS {
+        TrainConfig::preset(name).unwrap().validate().unwrap();
+    }
+    let err = TrainConfig::preset("huge").unwrap_err().to_string();
+    assert!(err.contains("huge") && err.contains("tiny"), "{err}");
+    assert!(TrainConfig::preset("tiny").unwrap().with_scales(9).is_err());
+}
