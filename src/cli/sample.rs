@@ -46,7 +46,7 @@ pub struct Outputs {
 
 /// Generates and writes the scenes.
 pub fn run(args: &SampleArgs) -> Result<()> {
-    let (model, state) = SinGrav::load(&args.model, &candle_core::Device::Cpu)?;
+    let (model, state) = SinGrav::load(&args.model, &super::train::device()?)?;
     if !state.finished(model.config()) {
         eprintln!(
             "note: {} is not fully trained (stopped at scale {}); sampling from its trained scales",

@@ -113,13 +113,21 @@ pub fn train_with_progress(
                 format_losses(&p.losses)
             )),
             Event::Checkpoint(_) => {}
-            Event::ScaleDone(picture) => bar.println(format!(
-                "scale {}/{} done in {:.0} s; samples: {}",
-                p.scale,
-                p.scales,
-                p.scale_seconds,
-                picture.display()
-            )),
+            Event::ScaleDone(picture) => {
+                let line = format!(
+                    "scale {}/{} done in {:.0} s; samples: {}",
+                    p.scale,
+                    p.scales,
+                    p.scale_seconds,
+                    picture.display()
+                );
+                // Without a terminal the bar is hidden; the per-scale lines still matter.
+                if bar.is_hidden() {
+                    eprintln!("{line}");
+                } else {
+                    bar.println(line);
+                }
+            }
         }
         Control::Continue
     };
@@ -128,7 +136,7 @@ pub fn train_with_progress(
         dataset,
         run_dir,
         resume,
-        &candle_core::Device::Cpu,
+        &device()?,
         &mut observer,
     )
     .with_context(|| format!("training into {}", run_dir.display()))?;
@@ -137,6 +145,15 @@ pub fn train_with_progress(
         TrainOutcome::Finished(model) => Ok(model),
         TrainOutcome::Stopped => anyhow::bail!("training stopped before the last scale"),
     }
+}
+
+/// The device networks train on: the first CUDA GPU when built with the `cuda` feature, else
+/// the CPU.
+pub fn device() -> Result<candle_core::Device> {
+    #[cfg(feature = "cuda")]
+    return Ok(candle_core::Device::new_cuda(0)?);
+    #[cfg(not(feature = "cuda"))]
+    Ok(candle_core::Device::Cpu)
 }
 
 /// The losses of a step, compactly.

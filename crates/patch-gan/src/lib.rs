@@ -47,7 +47,7 @@ mod wgan;
 
 /// Stateless ops, named after `torch.nn.functional`.
 pub mod functional {
-    pub use crate::conv3d::op::conv3d;
+    pub use crate::conv3d::op::{conv3d, conv3d_by_slices};
 }
 
 pub use conv3d::{conv3d, conv3d_no_bias, Conv3d, Conv3dConfig};

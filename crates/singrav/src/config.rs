@@ -48,6 +48,9 @@ pub struct TrainConfig {
     pub d_steps: usize,
     /// Generator steps per iteration (3).
     pub g_steps: usize,
+    /// Views rendered per step, for the critic's real and fake batches and the reconstruction
+    /// loss: rendering one volume from several views costs little next to generating it.
+    pub views_per_step: usize,
     /// Adam learning rate (5e-4) for generators and critics.
     pub learning_rate: f64,
     /// Adam betas (0.9, 0.999).
@@ -118,8 +121,9 @@ impl TrainConfig {
     /// - `paper`: the paper's N = 6 (volumes 40..126, renderings 32..160, final 320^2), L = 5,
     ///   32 channels, 64 to 128 samples. Needs a GPU (see docs/training.md).
     /// - `small`: N = 5, volumes 24..57, renderings 32..108, 16 channels; an hour-scale CPU run.
-    /// - `tiny`: N = 4, volumes 20..36, renderings 24..54 (final 108^2), 16 channels; about ten
-    ///   minutes on 2 CPU cores.
+    /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
+    ///   rate 1e-3 (fewer iterations than the paper, so larger steps); about ten minutes on
+    ///   2 CPU cores.
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds).
     pub fn preset(name: &str) -> Result<Self> {
         let paper = Self {
@@ -134,6 +138,7 @@ impl TrainConfig {
             reconstruction_only: 500,
             d_steps: 3,
             g_steps: 3,
+            views_per_step: 1,
             learning_rate: 5e-4,
             betas: (0.9, 0.999),
             gp_weight: 0.1,
@@ -154,6 +159,7 @@ impl TrainConfig {
         };
         let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
             preset: preset.into(),
+            views_per_step: 4,
             volume_sizes: geometric(volume, VOLUME_GROWTH, scales - 1),
             image_sizes: geometric(image, IMAGE_GROWTH, scales - 1),
             samples: sample_ramp(48, 96, scales - 1),
@@ -170,10 +176,11 @@ impl TrainConfig {
                 ..scaled("small", 5, 24, 32)
             }),
             "tiny" => Ok(Self {
-                iterations: 120,
-                reconstruction_only: 30,
+                iterations: 150,
+                reconstruction_only: 40,
+                learning_rate: 1e-3,
                 checkpoint_seconds: 60,
-                ..scaled("tiny", 4, 20, 24)
+                ..scaled("tiny", 4, 16, 24)
             }),
             "micro" => Ok(Self {
                 layers: 3,

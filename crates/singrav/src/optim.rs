@@ -66,6 +66,10 @@ impl Adam {
             let Some(grad) = grads.get(var.as_tensor()) else {
                 continue;
             };
+            // With CANDLE_GRAD_DO_NOT_DETACH (needed for the gradient penalty) gradients keep
+            // their backward graph; the moments must not, or every step's graph stays alive.
+            let grad = grad.detach();
+            let grad = &grad;
             let m = ((&self.first[i] * b1)? + (grad * (1.0 - b1))?)?;
             let v = ((&self.second[i] * b2)? + (grad.sqr()? * (1.0 - b2))?)?;
             let denom = ((&v / second_correction)?.sqrt()? + EPS)?;

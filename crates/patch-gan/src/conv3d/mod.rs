@@ -2,6 +2,7 @@
 
 mod cpu;
 pub(crate) mod op;
+mod slices;
 
 use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;

@@ -26,10 +26,33 @@ use crate::error::{invalid, Result};
 /// # Ok::<(), patch_gan::Error>(())
 /// ```
 pub fn conv3d(xs: &Tensor, kernel: &Tensor, cfg: Conv3dConfig) -> Result<Tensor> {
-    geometry(xs.shape(), kernel.shape(), cfg)?;
+    let g = geometry(xs.shape(), kernel.shape(), cfg)?;
+    if !xs.device().is_cpu() {
+        return super::slices::conv3d_by_slices(xs, kernel, &g);
+    }
     let xs = xs.contiguous()?;
     let kernel = kernel.contiguous()?;
     Ok(xs.apply_op2(&kernel, Conv3dOp(cfg))?)
+}
+
+/// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public
+/// so tests and benchmarks can compare it with the CPU kernel.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use patch_gan::{functional, Conv3dConfig};
+/// let x = Tensor::rand(-1f32, 1., (1, 2, 5, 4, 3), &Device::Cpu)?;
+/// let k = Tensor::rand(-1f32, 1., (3, 2, 3, 3, 3), &Device::Cpu)?;
+/// let cfg = Conv3dConfig { padding: 1, stride: 1 };
+/// let a = functional::conv3d(&x, &k, cfg)?;
+/// let b = functional::conv3d_by_slices(&x, &k, cfg)?;
+/// let diff = (a - b)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+/// assert!(diff < 1e-5);
+/// # Ok::<(), patch_gan::Error>(())
+/// ```
+pub fn conv3d_by_slices(xs: &Tensor, kernel: &Tensor, cfg: Conv3dConfig) -> Result<Tensor> {
+    let g = geometry(xs.shape(), kernel.shape(), cfg)?;
+    super::slices::conv3d_by_slices(xs, kernel, &g)
 }
 
 /// Checks the shapes and returns the geometry of `conv3d(xs, kernel)`.

@@ -11,7 +11,7 @@ use swd_loss::{PatchPyramid, PatchPyramidConfig, TextureLoss, TextureLossConfig}
 
 use super::critic::Critic;
 use super::run::Stage;
-use super::volume_scale::mse;
+use super::volume_scale::{mse, pick_views, select};
 use super::StepLosses;
 use crate::config::TrainConfig;
 use crate::dataset::DatasetLevel;
@@ -95,11 +95,12 @@ impl<'a> FinalScale<'a> {
         })
     }
 
-    /// A rendering `(1, 3, h, w)` of a random volume of the frozen pyramid from view `view`.
-    fn fake_rendering(&self, view: usize, rng: &mut impl Rng) -> Result<Tensor> {
+    /// Renderings `(V, 3, h, w)` of one random volume of the frozen pyramid from `views`.
+    fn fake_rendering(&self, views: &[usize], rng: &mut impl Rng) -> Result<Tensor> {
         let noise = self.model.draw_noise(self.config.volume_sizes.len(), rng)?;
         let volume = self.model.generate(&noise)?.detach();
-        Ok(self.renderer.render(&volume, &[&self.coarse.cameras[view]])?.0)
+        let cameras: Vec<_> = views.iter().map(|&v| &self.coarse.cameras[v]).collect();
+        Ok(self.renderer.render(&volume, &cameras)?.0)
     }
 
     /// The joint critic input `[G_N(x), up(x)]`.
@@ -115,10 +116,10 @@ impl Stage for FinalScale<'_> {
         if adversarial {
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
-                let (real_view, fake_view) = (rng.random_range(0..views), rng.random_range(0..views));
-                let coarse = self.fake_rendering(fake_view, rng)?;
+                let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
+                let fake_views = pick_views(rng, views, self.config.views_per_step);
+                let coarse = self.fake_rendering(&fake_views, rng)?;
                 let fake = self.joint(&self.model.upsample_images(&coarse)?, &coarse)?;
-                let real = self.real.narrow(0, real_view, 1)?;
                 let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
                 critic_sum += c;
                 penalty_sum += p;
@@ -131,24 +132,24 @@ impl Stage for FinalScale<'_> {
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if adversarial {
-                let fake_view = rng.random_range(0..views);
-                let coarse = self.fake_rendering(fake_view, rng)?;
+                let fake_views = pick_views(rng, views, self.config.views_per_step);
+                let coarse = self.fake_rendering(&fake_views, rng)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
                 let adv = self.critic.generator_loss(&self.joint(&upsampled, &coarse)?)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
                 if let Some(texture) = &self.texture {
-                    let target = texture.target(&self.fine.images.narrow(0, fake_view, 1)?)?;
+                    let target = texture.target(&select(&self.fine.images, &fake_views)?)?;
                     let swd = (texture.loss(&upsampled, &target, rng)? * self.config.lambda_swd)?;
                     swd_sum += swd.to_scalar::<f32>()?;
                     total = (total + swd)?;
                 }
             }
-            let view = rng.random_range(0..views);
+            let rec_views = pick_views(rng, views, self.config.views_per_step);
             let rebuilt = self
                 .model
-                .upsample_images(&self.reconstruction.narrow(0, view, 1)?)?;
-            let color = (mse(&rebuilt, &self.fine.images.narrow(0, view, 1)?)? * self.config.lambda_color)?;
+                .upsample_images(&select(&self.reconstruction, &rec_views)?)?;
+            let color = (mse(&rebuilt, &select(&self.fine.images, &rec_views)?)? * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
             total = (total + color)?;
             self.opt.step(&total.backward()?)?;
@@ -168,7 +169,7 @@ impl Stage for FinalScale<'_> {
                 .get(0)?,
         ];
         for _ in 0..count {
-            let coarse = self.fake_rendering(0, rng)?;
+            let coarse = self.fake_rendering(&[0], rng)?;
             row.push(self.model.upsample_images(&coarse)?.get(0)?);
         }
         Ok(vec![row])

@@ -33,6 +33,18 @@ pub(super) struct VolumeScale<'a> {
     prev_reconstruction: Option<Tensor>,
 }
 
+/// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
+pub(super) fn pick_views(rng: &mut impl Rng, views: usize, count: usize) -> Vec<usize> {
+    rand::seq::index::sample(rng, views, count.min(views)).into_vec()
+}
+
+/// The images of `views` from a `(V, ...)` tensor.
+pub(super) fn select(images: &Tensor, views: &[usize]) -> Result<Tensor> {
+    let index: Vec<u32> = views.iter().map(|&v| v as u32).collect();
+    let index = Tensor::from_vec(index, views.len(), images.device())?;
+    Ok(images.index_select(&index, 0)?)
+}
+
 /// Mean squared error of two equally shaped tensors.
 pub(super) fn mse(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     Ok((a - b)?.sqr()?.mean_all()?)
@@ -111,6 +123,10 @@ impl<'a> VolumeScale<'a> {
     fn views(&self) -> usize {
         self.level.cameras.len()
     }
+
+    fn cameras(&self, views: &[usize]) -> Vec<&volrender::Camera> {
+        views.iter().map(|&v| &self.level.cameras[v]).collect()
+    }
 }
 
 impl Stage for VolumeScale<'_> {
@@ -121,11 +137,11 @@ impl Stage for VolumeScale<'_> {
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
                 let fake_volume = self.fake_volume(rng)?.detach();
-                let (real_view, fake_view) = (rng.random_range(0..views), rng.random_range(0..views));
-                let real = self.real.narrow(0, real_view, 1)?;
+                let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
+                let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let fake = self
                     .renderer
-                    .render_joined(&fake_volume, &[&self.level.cameras[fake_view]])?;
+                    .render_joined(&fake_volume, &self.cameras(&fake_views))?;
                 let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
                 critic_sum += c;
                 penalty_sum += p;
@@ -138,23 +154,23 @@ impl Stage for VolumeScale<'_> {
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if adversarial {
-                let fake_view = rng.random_range(0..views);
+                let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let fake = self
                     .renderer
-                    .render_joined(&self.fake_volume(rng)?, &[&self.level.cameras[fake_view]])?;
+                    .render_joined(&self.fake_volume(rng)?, &self.cameras(&fake_views))?;
                 let adv = self.critic.generator_loss(&fake)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
             }
-            let view = rng.random_range(0..views);
+            let rec_views = pick_views(rng, views, self.config.views_per_step);
             let (rgb, depth) = self
                 .renderer
-                .render(&self.reconstruction()?, &[&self.level.cameras[view]])?;
-            let color = (mse(&rgb, &self.level.images.narrow(0, view, 1)?)? * self.config.lambda_color)?;
+                .render(&self.reconstruction()?, &self.cameras(&rec_views))?;
+            let color = (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
             total = (total + color)?;
             if let Some(depth) = depth {
-                let real_depth = self.real.narrow(0, view, 1)?.narrow(1, 3, 1)?;
+                let real_depth = select(&self.real, &rec_views)?.narrow(1, 3, 1)?;
                 let depth = (mse(&depth, &real_depth)? * self.config.lambda_depth)?;
                 depth_sum += depth.to_scalar::<f32>()?;
                 total = (total + depth)?;

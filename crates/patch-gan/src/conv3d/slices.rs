@@ -1,0 +1,37 @@
+//! Conv3d from candle's own conv2d: the path for devices without our CPU kernel (CUDA).
+
+use candle_core::{Tensor, D};
+
+use super::cpu::Geometry;
+use crate::error::{invalid, Result};
+
+/// `conv3d` as a sum over the kernel's depth taps of conv2d over depth slices: for tap `kd`,
+/// the input slices `kd, kd + stride, ...` (of the depth-padded input) are folded into the batch
+/// and convolved with the kernel's slice `kd`. Built from candle ops only, so it runs and
+/// differentiates on every device candle's conv2d supports. `g` comes from `geometry`.
+pub(crate) fn conv3d_by_slices(xs: &Tensor, kernel: &Tensor, g: &Geometry) -> Result<Tensor> {
+    let [d_out, _, _] = g.output();
+    let (n, p, s) = (g.batch, g.padding, g.stride);
+    let padded = xs.pad_with_zeros(2, p, p)?;
+    let mut sum: Option<Tensor> = None;
+    for kd in 0..g.kernel {
+        let depths: Vec<u32> = (0..d_out).map(|z| (kd + z * s) as u32).collect();
+        let index = Tensor::from_vec(depths, d_out, xs.device())?;
+        // (N, C_in, D_out, H, W) -> (N * D_out, C_in, H, W)
+        let slices = padded.index_select(&index, 2)?.permute((0, 2, 1, 3, 4))?;
+        let (h, w) = (slices.dim(3)?, slices.dim(4)?);
+        let slices = slices.contiguous()?.reshape((n * d_out, g.c_in, h, w))?;
+        let taps = kernel.narrow(2, kd, 1)?.squeeze(2)?.contiguous()?;
+        let part = slices.conv2d(&taps, p, s, 1, 1)?;
+        sum = Some(match sum {
+            None => part,
+            Some(acc) => (acc + part)?,
+        });
+    }
+    let out = sum.ok_or_else(|| invalid("kernel", "has no depth taps"))?;
+    let (h_out, w_out) = (out.dim(D::Minus2)?, out.dim(D::Minus1)?);
+    Ok(out
+        .reshape((n, d_out, g.c_out, h_out, w_out))?
+        .permute((0, 2, 1, 3, 4))?
+        .contiguous()?)
+}
