@@ -95,12 +95,17 @@ impl<'a> FinalScale<'a> {
         })
     }
 
-    /// Renderings `(V, 3, h, w)` of one random volume of the frozen pyramid from `views`.
-    fn fake_rendering(&self, views: &[usize], rng: &mut impl Rng) -> Result<Tensor> {
+    /// A random raw volume of the frozen 3D pyramid (drawn once per iteration, as SinGAN
+    /// draws noise once per iteration).
+    fn fake_volume(&self, rng: &mut impl Rng) -> Result<Tensor> {
         let noise = self.model.draw_noise(self.config.volume_sizes.len(), rng)?;
-        let volume = self.model.generate(&noise)?.detach();
+        Ok(self.model.generate(&noise)?.detach())
+    }
+
+    /// Renderings `(V, 3, h, w)` of `volume` from `views`.
+    fn fake_rendering(&self, volume: &Tensor, views: &[usize]) -> Result<Tensor> {
         let cameras: Vec<_> = views.iter().map(|&v| &self.coarse.cameras[v]).collect();
-        Ok(self.renderer.render(&volume, &cameras)?.0)
+        Ok(self.renderer.render(volume, &cameras)?.0)
     }
 
     /// The joint critic input `[G_N(x), up(x)]`.
@@ -113,12 +118,13 @@ impl Stage for FinalScale<'_> {
     fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
         let mut losses = StepLosses::default();
         let views = self.coarse.cameras.len();
-        if adversarial {
+        let fake_volume = if adversarial { Some(self.fake_volume(rng)?) } else { None };
+        if let Some(volume) = &fake_volume {
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
                 let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
-                let coarse = self.fake_rendering(&fake_views, rng)?;
+                let coarse = self.fake_rendering(volume, &fake_views)?;
                 let fake = self.joint(&self.model.upsample_images(&coarse)?, &coarse)?;
                 let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
                 critic_sum += c;
@@ -131,9 +137,9 @@ impl Stage for FinalScale<'_> {
         let (mut adversarial_sum, mut color_sum, mut swd_sum) = (0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
-            if adversarial {
+            if let Some(volume) = &fake_volume {
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
-                let coarse = self.fake_rendering(&fake_views, rng)?;
+                let coarse = self.fake_rendering(volume, &fake_views)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
                 let adv = self.critic.generator_loss(&self.joint(&upsampled, &coarse)?)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
@@ -169,7 +175,7 @@ impl Stage for FinalScale<'_> {
                 .get(0)?,
         ];
         for _ in 0..count {
-            let coarse = self.fake_rendering(&[0], rng)?;
+            let coarse = self.fake_rendering(&self.fake_volume(rng)?, &[0])?;
             row.push(self.model.upsample_images(&coarse)?.get(0)?);
         }
         Ok(vec![row])

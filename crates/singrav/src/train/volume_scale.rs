@@ -17,6 +17,14 @@ use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
 
+/// One iteration's random draw: this scale's noise and the frozen coarser volume it refines.
+/// As in SinGAN, noise is drawn once per iteration: the critic steps see the same fake (here
+/// from different views) and the generator steps refine the same draw.
+struct Draw {
+    z: Tensor,
+    coarser: Option<Tensor>,
+}
+
 /// The state of one 3D scale's training.
 pub(super) struct VolumeScale<'a> {
     model: &'a SinGrav,
@@ -91,16 +99,25 @@ impl<'a> VolumeScale<'a> {
         })
     }
 
-    /// A random volume of this scale: fresh noise at every scale, coarser scales frozen.
-    fn fake_volume(&self, rng: &mut impl Rng) -> Result<Tensor> {
-        let noise = self.model.draw_noise(self.n, rng)?;
-        match &noise[..] {
-            [z] => self.model.coarsest(z),
-            [coarser @ .., z] => {
-                let prev = self.model.generate(coarser)?.detach();
-                self.model.refine(self.n, z, &prev)
-            }
-            [] => Err(crate::error::invalid("scale", "no 3D scale to generate")),
+    /// Draws fresh noise at every scale and runs the frozen coarser scales on it.
+    fn draw(&self, rng: &mut impl Rng) -> Result<Draw> {
+        let mut noise = self.model.draw_noise(self.n, rng)?;
+        let z = noise
+            .pop()
+            .ok_or_else(|| crate::error::invalid("scale", "no 3D scale to generate"))?;
+        let coarser = if noise.is_empty() {
+            None
+        } else {
+            Some(self.model.generate(&noise)?.detach())
+        };
+        Ok(Draw { z, coarser })
+    }
+
+    /// The random volume of this scale for a draw, differentiable in G_n.
+    fn fake_volume(&self, draw: &Draw) -> Result<Tensor> {
+        match &draw.coarser {
+            None => self.model.coarsest(&draw.z),
+            Some(prev) => self.model.refine(self.n, &draw.z, prev),
         }
     }
 
@@ -133,10 +150,11 @@ impl Stage for VolumeScale<'_> {
     fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
         let mut losses = StepLosses::default();
         let views = self.views();
-        if adversarial {
+        let draw = if adversarial { Some(self.draw(rng)?) } else { None };
+        if let Some(draw) = &draw {
+            let fake_volume = self.fake_volume(draw)?.detach();
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
-                let fake_volume = self.fake_volume(rng)?.detach();
                 let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let fake = self
@@ -153,11 +171,11 @@ impl Stage for VolumeScale<'_> {
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
-            if adversarial {
+            if let Some(draw) = &draw {
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let fake = self
                     .renderer
-                    .render_joined(&self.fake_volume(rng)?, &self.cameras(&fake_views))?;
+                    .render_joined(&self.fake_volume(draw)?, &self.cameras(&fake_views))?;
                 let adv = self.critic.generator_loss(&fake)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
@@ -191,7 +209,8 @@ impl Stage for VolumeScale<'_> {
             self.renderer.render(&self.reconstruction()?.detach(), &camera)?.0.get(0)?,
         ];
         for _ in 0..count {
-            row.push(self.renderer.render(&self.fake_volume(rng)?.detach(), &camera)?.0.get(0)?);
+            let fake = self.fake_volume(&self.draw(rng)?)?.detach();
+            row.push(self.renderer.render(&fake, &camera)?.0.get(0)?);
         }
         Ok(vec![row])
     }
