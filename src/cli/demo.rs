@@ -31,6 +31,9 @@ pub struct DemoArgs {
     /// Views in the dataset.
     #[arg(long, default_value_t = 100)]
     views: usize,
+    /// Edge of the dataset's images (default: the preset's final size, at least 128).
+    #[arg(long, value_name = "PIXELS")]
+    resolution: Option<usize>,
     #[command(flatten)]
     train: TrainOptions,
 }
@@ -61,7 +64,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let samples_dir = args.out.join("samples");
 
     let started = Instant::now();
-    let resolution = config.final_image_size().max(128);
+    let resolution = args
+        .resolution
+        .unwrap_or_else(|| config.final_image_size().max(128));
     let spec = DatasetSpec {
         views: args.views,
         resolution,
@@ -105,7 +110,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         vdb: cfg!(feature = "vdb"),
         exr_slices: false,
     };
-    let samples = sample_to_dir(&model, &cameras, args.count, args.train.seed, &samples_dir, outputs)?;
+    let samples = sample_to_dir(
+        &model,
+        &cameras,
+        args.count,
+        args.train.seed,
+        &samples_dir,
+        outputs,
+    )?;
     let overview = args.out.join("overview.png");
     write_overview(&overview, &model, &dataset, input_views, &samples)?;
 
@@ -127,7 +139,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             .collect(),
     };
     write_summary(&args.out, &summary)?;
-    println!("done: overview {} (top row: input views; below: generated scenes)", overview.display());
+    println!(
+        "done: overview {} (top row: input views; below: generated scenes)",
+        overview.display()
+    );
     println!("      summary  {}", args.out.join("summary.md").display());
     println!("      volumes  {}", summary.samples.display());
     Ok(())
@@ -164,12 +179,16 @@ fn write_overview(
 /// The last logged losses of every scale.
 fn last_losses_per_scale(run_dir: &Path) -> Result<Vec<serde_json::Value>> {
     let path = run_dir.join("log.jsonl");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let mut last: Vec<serde_json::Value> = Vec::new();
     for line in text.lines() {
         let value: serde_json::Value =
             serde_json::from_str(line).with_context(|| format!("parsing {}", path.display()))?;
-        let scale = value.get("scale").and_then(serde_json::Value::as_u64).unwrap_or(0);
+        let scale = value
+            .get("scale")
+            .and_then(serde_json::Value::as_u64)
+            .unwrap_or(0);
         match last.last_mut() {
             Some(prev) if prev.get("scale").and_then(serde_json::Value::as_u64) == Some(scale) => {
                 *prev = value;
@@ -182,25 +201,54 @@ fn last_losses_per_scale(run_dir: &Path) -> Result<Vec<serde_json::Value>> {
 
 /// Writes summary.json and summary.md.
 fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
-    write_text(&dir.join("summary.json"), &serde_json::to_string_pretty(summary)?)?;
+    write_text(
+        &dir.join("summary.json"),
+        &serde_json::to_string_pretty(summary)?,
+    )?;
     let mut md = String::new();
-    writeln!(md, "# volgen demo: `{}` scene, `{}` preset\n", summary.scene, summary.preset)?;
-    writeln!(md, "- dataset: {} ({:.0} s)", summary.dataset.display(), summary.dataset_seconds)?;
-    writeln!(md, "- model: {} (training {:.0} s)", summary.model.display(), summary.training_seconds)?;
+    writeln!(
+        md,
+        "# volgen demo: `{}` scene, `{}` preset\n",
+        summary.scene, summary.preset
+    )?;
+    writeln!(
+        md,
+        "- dataset: {} ({:.0} s)",
+        summary.dataset.display(),
+        summary.dataset_seconds
+    )?;
+    writeln!(
+        md,
+        "- model: {} (training {:.0} s)",
+        summary.model.display(),
+        summary.training_seconds
+    )?;
     writeln!(md, "- overview: {}", summary.overview.display())?;
     writeln!(md, "- generated volumes: {}\n", summary.samples.display())?;
-    writeln!(md, "| scale | seconds | peak MiB | last losses |\n|---|---|---|---|")?;
+    writeln!(
+        md,
+        "| scale | seconds | peak MiB | last losses |\n|---|---|---|---|"
+    )?;
     for (i, seconds) in summary.scale_seconds.iter().enumerate() {
         let mib = summary.scale_peak_mib.get(i).copied().flatten();
-        let losses = summary.final_losses.get(i).map(ToString::to_string).unwrap_or_default();
+        let losses = summary
+            .final_losses
+            .get(i)
+            .map(ToString::to_string)
+            .unwrap_or_default();
         writeln!(
             md,
             "| {} | {seconds:.0} | {} | `{losses}` |",
             i + 1,
-            mib.map(|m| format!("{m:.0}")).unwrap_or_else(|| "n/a".into())
+            mib.map(|m| format!("{m:.0}"))
+                .unwrap_or_else(|| "n/a".into())
         )?;
     }
-    let times: Vec<String> = summary.generation_seconds.iter().map(|s| format!("{s:.3}")).collect();
+    let times: Vec<String> = summary
+        .generation_seconds
+        .iter()
+        .map(|s| format!("{s:.3}"))
+        .collect();
     writeln!(md, "\nGeneration time per scene (s): {}", times.join(", "))?;
     write_text(&dir.join("summary.md"), &md)
 }

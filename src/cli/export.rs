@@ -116,6 +116,11 @@ pub fn write_exr_slices(
 }
 
 #[cfg(not(feature = "exr"))]
-pub fn write_exr_slices(_: &RadianceVolume, _: &std::path::Path, _: &str, _: &Encoding) -> Result<()> {
+pub fn write_exr_slices(
+    _: &RadianceVolume,
+    _: &std::path::Path,
+    _: &str,
+    _: &Encoding,
+) -> Result<()> {
     bail!("this volgen was built without the `exr` feature; rebuild with `--features exr`")
 }

@@ -87,7 +87,11 @@ pub fn sample_to_dir(
             .collect::<candle_core::Result<Vec<_>>>()?;
         singrav::picture::write_grid(&dir.join(format!("{stem}.png")), &[views])?;
         if outputs.vdb {
-            write_vdb(&sample.volume, &dir.join(format!("{stem}.vdb")), &Encoding::default())?;
+            write_vdb(
+                &sample.volume,
+                &dir.join(format!("{stem}.vdb")),
+                &Encoding::default(),
+            )?;
         }
         if outputs.exr_slices {
             write_exr_slices(

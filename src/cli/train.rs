@@ -131,15 +131,8 @@ pub fn train_with_progress(
         }
         Control::Continue
     };
-    let outcome = train(
-        config,
-        dataset,
-        run_dir,
-        resume,
-        &device()?,
-        &mut observer,
-    )
-    .with_context(|| format!("training into {}", run_dir.display()))?;
+    let outcome = train(config, dataset, run_dir, resume, &device()?, &mut observer)
+        .with_context(|| format!("training into {}", run_dir.display()))?;
     bar.finish_and_clear();
     match outcome {
         TrainOutcome::Finished(model) => Ok(model),

@@ -410,7 +410,10 @@ fn path_loss_and_grads(
     slices: bool,
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let (xt, wt) = case.tensors(x, w);
-    let (xv, wv) = (Var::from_tensor(&xt).unwrap(), Var::from_tensor(&wt).unwrap());
+    let (xv, wv) = (
+        Var::from_tensor(&xt).unwrap(),
+        Var::from_tensor(&wt).unwrap(),
+    );
     let conv = if slices {
         functional::conv3d_by_slices
     } else {
@@ -418,7 +421,16 @@ fn path_loss_and_grads(
     };
     let y = conv(xv.as_tensor(), wv.as_tensor(), case.cfg).unwrap();
     let r = Tensor::from_vec(random(y.elem_count(), seed), y.shape(), &Device::Cpu).unwrap();
-    assert_eq!(y.dims(), &[case.n, case.c_out, case.out()[0], case.out()[1], case.out()[2]]);
+    assert_eq!(
+        y.dims(),
+        &[
+            case.n,
+            case.c_out,
+            case.out()[0],
+            case.out()[1],
+            case.out()[2]
+        ]
+    );
     let grads = (&y * r).unwrap().sum_all().unwrap().backward().unwrap();
     let flat = |t: &Tensor| -> Vec<f64> { t.flatten_all().unwrap().to_vec1().unwrap() };
     (
@@ -434,7 +446,11 @@ fn path_loss_and_grads(
 /// padding); the generators use stride 1.
 #[test]
 fn slice_path_matches_the_cpu_kernel() {
-    for (i, case) in cases().iter().enumerate().filter(|(_, c)| c.cfg.stride == 1) {
+    for (i, case) in cases()
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.cfg.stride == 1)
+    {
         let x = random(case.x_len(), 30 + i as u64);
         let w = random(case.w_len(), 40 + i as u64);
         let kernel = path_loss_and_grads(case, &x, &w, 50 + i as u64, false);

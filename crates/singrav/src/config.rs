@@ -176,8 +176,8 @@ impl TrainConfig {
                 ..scaled("small", 5, 24, 32)
             }),
             "tiny" => Ok(Self {
-                iterations: 150,
-                reconstruction_only: 40,
+                iterations: 100,
+                reconstruction_only: 25,
                 learning_rate: 1e-3,
                 checkpoint_seconds: 60,
                 ..scaled("tiny", 4, 16, 24)
@@ -297,8 +297,10 @@ impl TrainConfig {
                 "must be finite and non-negative (learning rate positive)",
             ));
         }
-        if !(self.density_scale.is_finite() && self.density_scale > 0.0)
-            || !self.density_shift.is_finite()
+        let density_ok = self.density_scale.is_finite()
+            && self.density_scale > 0.0
+            && self.density_shift.is_finite();
+        if !density_ok
             || self.background.iter().any(|c| !(0.0..=1.0).contains(c))
         {
             return Err(invalid(

@@ -86,10 +86,12 @@ impl SinGrav {
         let started = Instant::now();
         let noise = self.draw_noise(self.volume_scales(), rng)?;
         let raw = self.generate(&noise)?.detach();
-        let volume = RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &self.config().activation())?;
+        let volume =
+            RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &self.config().activation())?;
         let generation_seconds = started.elapsed().as_secs_f64();
         let last = self.volume_scales();
-        let renderer = ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false);
+        let renderer =
+            ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false);
         let refs: Vec<&Camera> = cameras.iter().collect();
         let (coarse, _) = renderer.render(&raw, &refs)?;
         let views = if self.has_upsampler() {

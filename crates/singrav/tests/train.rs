@@ -30,7 +30,11 @@ fn micro() -> TrainConfig {
 }
 
 /// Trains to the end, collecting every step's losses.
-fn run_to_end(config: &TrainConfig, data: &Dataset, dir: &Path) -> (SinGrav, Vec<(usize, StepLosses)>) {
+fn run_to_end(
+    config: &TrainConfig,
+    data: &Dataset,
+    dir: &Path,
+) -> (SinGrav, Vec<(usize, StepLosses)>) {
     let mut steps = Vec::new();
     let mut observer = |p: &Progress| {
         if p.event == Event::Step {
@@ -75,8 +79,18 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let (model, steps) = run_to_end(&config, &data, &run);
     assert_eq!(steps.len(), config.scales() * config.iterations);
     for (scale, l) in &steps {
-        let terms = [l.critic, l.penalty, l.adversarial, Some(l.color), l.depth, l.swd];
-        assert!(terms.iter().flatten().all(|v| v.is_finite()), "scale {scale}: {l:?}");
+        let terms = [
+            l.critic,
+            l.penalty,
+            l.adversarial,
+            Some(l.color),
+            l.depth,
+            l.swd,
+        ];
+        assert!(
+            terms.iter().flatten().all(|v| v.is_finite()),
+            "scale {scale}: {l:?}"
+        );
     }
     // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
     assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));
@@ -93,14 +107,29 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let sample = model.sample(&mut rng, &cams).unwrap();
     let size = config.volume_sizes[1];
     assert_eq!(sample.volume.tensor().dims(), &[4, size, size, size]);
-    assert_eq!(sample.views.dims(), &[2, 3, config.final_image_size(), config.final_image_size()]);
+    assert_eq!(
+        sample.views.dims(),
+        &[2, 3, config.final_image_size(), config.final_image_size()]
+    );
     let (loaded, state) = SinGrav::load(&run, &Device::Cpu).unwrap();
     assert!(state.finished(&config));
     let again = loaded
         .sample(&mut rand_chacha::ChaCha8Rng::seed_from_u64(5), &cams)
         .unwrap();
-    let a: Vec<f32> = sample.volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
-    let b: Vec<f32> = again.volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    let a: Vec<f32> = sample
+        .volume
+        .tensor()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let b: Vec<f32> = again
+        .volume
+        .tensor()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
     assert_eq!(a, b, "a loaded model samples what the trained one does");
 }
 
@@ -117,11 +146,25 @@ fn reconstruction_loss_falls() {
     .with_scales(2)
     .unwrap();
     let (_, steps) = run_to_end(&config, &data, &tmp.path().join("run"));
-    let colour: Vec<f32> = steps.iter().filter(|(s, _)| *s == 1).map(|(_, l)| l.color).collect();
-    let depth: Vec<f32> = steps.iter().filter(|(s, _)| *s == 1).map(|(_, l)| l.depth.unwrap()).collect();
+    let colour: Vec<f32> = steps
+        .iter()
+        .filter(|(s, _)| *s == 1)
+        .map(|(_, l)| l.color)
+        .collect();
+    let depth: Vec<f32> = steps
+        .iter()
+        .filter(|(s, _)| *s == 1)
+        .map(|(_, l)| l.depth.unwrap())
+        .collect();
     let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
-    assert!(mean(&colour[12..]) < 0.8 * mean(&colour[..4]), "colour {colour:?}");
-    assert!(mean(&depth[12..]) < 0.8 * mean(&depth[..4]), "depth {depth:?}");
+    assert!(
+        mean(&colour[12..]) < 0.8 * mean(&colour[..4]),
+        "colour {colour:?}"
+    );
+    assert!(
+        mean(&depth[12..]) < 0.8 * mean(&depth[..4]),
+        "depth {depth:?}"
+    );
 }
 
 #[test]
@@ -165,14 +208,21 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     };
     let outcome = train(&config, &data, &killed, false, &Device::Cpu, &mut stop).unwrap();
     assert!(matches!(outcome, TrainOutcome::Stopped));
-    let state = Checkpoint::load(&killed.join(CHECKPOINT_FILE), &Device::Cpu).unwrap().state;
+    let state = Checkpoint::load(&killed.join(CHECKPOINT_FILE), &Device::Cpu)
+        .unwrap()
+        .state;
     assert_eq!((state.scale, state.iteration), (2, 2));
 
     // Without --resume the run directory is refused rather than overwritten.
-    let err = train(&config, &data, &killed, false, &Device::Cpu, &mut |_| Control::Continue);
+    let err = train(&config, &data, &killed, false, &Device::Cpu, &mut |_| {
+        Control::Continue
+    });
     assert!(matches!(err, Err(Error::Checkpoint { .. })));
 
-    let resumed = train(&config, &data, &killed, true, &Device::Cpu, &mut |_| Control::Continue).unwrap();
+    let resumed = train(&config, &data, &killed, true, &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .unwrap();
     assert!(matches!(resumed, TrainOutcome::Finished(_)));
     assert_same_tensors(
         &checkpoint_tensors(&tmp.path().join("whole")),
@@ -194,16 +244,28 @@ fn resume_refuses_another_configuration_and_names_the_field() {
         lambda_depth: 1.0,
         ..config
     };
-    let err = train(&other, &data, &run, true, &Device::Cpu, &mut |_| Control::Continue)
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(err.contains("lambda_depth") && err.contains(CHECKPOINT_FILE), "{err}");
+    let err = train(&other, &data, &run, true, &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(
+        err.contains("lambda_depth") && err.contains(CHECKPOINT_FILE),
+        "{err}"
+    );
 
-    let missing = train(&other, &data, &tmp.path().join("empty"), true, &Device::Cpu, &mut |_| Control::Continue)
-        .err()
-        .unwrap()
-        .to_string();
+    let missing = train(
+        &other,
+        &data,
+        &tmp.path().join("empty"),
+        true,
+        &Device::Cpu,
+        &mut |_| Control::Continue,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(missing.contains("no checkpoint"), "{missing}");
 }
 
@@ -212,8 +274,14 @@ fn broken_checkpoint_is_a_clear_error() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join(CHECKPOINT_FILE);
     std::fs::write(&path, b"not a checkpoint").unwrap();
-    let err = SinGrav::load(tmp.path(), &Device::Cpu).err().unwrap().to_string();
-    assert!(err.contains(CHECKPOINT_FILE) && err.contains("safetensors"), "{err}");
+    let err = SinGrav::load(tmp.path(), &Device::Cpu)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains(CHECKPOINT_FILE) && err.contains("safetensors"),
+        "{err}"
+    );
 }
 
 #[test]

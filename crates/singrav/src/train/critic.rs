@@ -37,7 +37,8 @@ impl Critic {
             channels: config.channels,
             in_channels,
         };
-        let net = PatchDiscriminator2d::new(&cfg, VarBuilder::from_varmap(&vars, DType::F32, device))?;
+        let net =
+            PatchDiscriminator2d::new(&cfg, VarBuilder::from_varmap(&vars, DType::F32, device))?;
         seeded_init(&vars, rng)?;
         if let Some(previous) = previous {
             copy_matching(previous, &vars)?;

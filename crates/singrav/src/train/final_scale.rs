@@ -115,14 +115,25 @@ impl<'a> FinalScale<'a> {
 }
 
 impl Stage for FinalScale<'_> {
-    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
+    fn iteration(
+        &mut self,
+        adversarial: bool,
+        rng: &mut rand_chacha::ChaCha8Rng,
+    ) -> Result<StepLosses> {
         let mut losses = StepLosses::default();
         let views = self.coarse.cameras.len();
-        let fake_volume = if adversarial { Some(self.fake_volume(rng)?) } else { None };
+        let fake_volume = if adversarial {
+            Some(self.fake_volume(rng)?)
+        } else {
+            None
+        };
         if let Some(volume) = &fake_volume {
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
-                let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
+                let real = select(
+                    &self.real,
+                    &pick_views(rng, views, self.config.views_per_step),
+                )?;
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let coarse = self.fake_rendering(volume, &fake_views)?;
                 let fake = self.joint(&self.model.upsample_images(&coarse)?, &coarse)?;
@@ -141,7 +152,9 @@ impl Stage for FinalScale<'_> {
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let coarse = self.fake_rendering(volume, &fake_views)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
-                let adv = self.critic.generator_loss(&self.joint(&upsampled, &coarse)?)?;
+                let adv = self
+                    .critic
+                    .generator_loss(&self.joint(&upsampled, &coarse)?)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
                 if let Some(texture) = &self.texture {
@@ -155,7 +168,8 @@ impl Stage for FinalScale<'_> {
             let rebuilt = self
                 .model
                 .upsample_images(&select(&self.reconstruction, &rec_views)?)?;
-            let color = (mse(&rebuilt, &select(&self.fine.images, &rec_views)?)? * self.config.lambda_color)?;
+            let color = (mse(&rebuilt, &select(&self.fine.images, &rec_views)?)?
+                * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
             total = (total + color)?;
             self.opt.step(&total.backward()?)?;
@@ -167,7 +181,11 @@ impl Stage for FinalScale<'_> {
         Ok(losses)
     }
 
-    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>> {
+    fn picture_rows(
+        &self,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        count: usize,
+    ) -> Result<Vec<Vec<Tensor>>> {
         let mut row = vec![
             self.fine.images.get(0)?,
             self.model

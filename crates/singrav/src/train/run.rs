@@ -24,9 +24,17 @@ use crate::render::ViewRenderer;
 pub(super) trait Stage {
     /// Runs one iteration (`d_steps` critic steps when `adversarial`, then `g_steps` generator
     /// steps) drawing all randomness from `rng`.
-    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses>;
+    fn iteration(
+        &mut self,
+        adversarial: bool,
+        rng: &mut rand_chacha::ChaCha8Rng,
+    ) -> Result<StepLosses>;
     /// Rows of the scale's picture: real view, reconstruction, then `count` samples.
-    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>>;
+    fn picture_rows(
+        &self,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        count: usize,
+    ) -> Result<Vec<Vec<Tensor>>>;
     /// The critic and the generator's optimiser (for checkpoints).
     fn parts(&mut self) -> (&mut Critic, &mut Adam);
 }
@@ -121,7 +129,14 @@ pub fn train(
                 model.push_generator(amp, &mut setup)?;
                 state.noise_amps.push(amp);
             }
-            Box::new(VolumeScale::new(&model, n, level, state.depth_norm, previous, &mut setup)?)
+            Box::new(VolumeScale::new(
+                &model,
+                n,
+                level,
+                state.depth_norm,
+                previous,
+                &mut setup,
+            )?)
         } else {
             if fresh {
                 model.push_upsampler(&mut setup)?;
@@ -139,7 +154,10 @@ pub fn train(
         while state.iteration < config.iterations {
             let it = state.iteration;
             let started = Instant::now();
-            let losses = stage.iteration(it >= config.reconstruction_only, &mut step_rng(config.seed, n, it))?;
+            let losses = stage.iteration(
+                it >= config.reconstruction_only,
+                &mut step_rng(config.seed, n, it),
+            )?;
             check_finite(&losses, n, it)?;
             state.current_seconds += started.elapsed().as_secs_f64();
             state.iteration += 1;
@@ -162,7 +180,13 @@ pub fn train(
             let due_by_count = config.checkpoint_iterations > 0
                 && state.iteration % config.checkpoint_iterations == 0;
             if state.iteration < config.iterations && (due_by_time || due_by_count) {
-                save(&checkpoint_file, config, &state, &model, Some(stage.as_mut()))?;
+                save(
+                    &checkpoint_file,
+                    config,
+                    &state,
+                    &model,
+                    Some(stage.as_mut()),
+                )?;
                 last_checkpoint = Instant::now();
                 progress.event = Event::Checkpoint(checkpoint_file.clone());
                 if observer(&progress) == Control::Stop {
@@ -172,7 +196,10 @@ pub fn train(
         }
         let picture = picture_path(run_dir, n);
         crate::io::create_dir(picture.parent().unwrap_or(run_dir))?;
-        let rows = stage.picture_rows(&mut step_rng(config.seed, n, PICTURE_STREAM), PICTURE_SAMPLES)?;
+        let rows = stage.picture_rows(
+            &mut step_rng(config.seed, n, PICTURE_STREAM),
+            PICTURE_SAMPLES,
+        )?;
         crate::picture::write_grid(&picture, &rows)?;
         previous_critic = var_tensors(&stage.parts().0.vars);
         drop(stage);
@@ -218,12 +245,19 @@ fn depth_norm(dataset: &Dataset) -> f32 {
 
 /// The noise amplitude of a new scale n: the first scale's is fixed; above, SinGAN's rule
 /// `factor * RMSE(render(up(V*_{n-1})), x_n)`.
-fn noise_amplitude(model: &SinGrav, n: usize, level: &crate::dataset::DatasetLevel, depth_norm: f32) -> Result<f64> {
+fn noise_amplitude(
+    model: &SinGrav,
+    n: usize,
+    level: &crate::dataset::DatasetLevel,
+    depth_norm: f32,
+) -> Result<f64> {
     let config = model.config();
     if n == 1 {
         return Ok(config.noise_amp_first);
     }
-    let coarse = model.generate(&model.reconstruction_noise(n - 1)?)?.detach();
+    let coarse = model
+        .generate(&model.reconstruction_noise(n - 1)?)?
+        .detach();
     let up = model.upsample_to_scale(&coarse, n)?;
     let renderer = ViewRenderer::new(config, config.samples[n - 1], depth_norm, false);
     Ok(config.noise_amp_factor * reconstruction_rmse(&renderer, &up, level, AMPLITUDE_VIEWS)?)
@@ -325,7 +359,10 @@ fn restore_stage(
     load_into(&critic.vars, tensors, "d.", device).map_err(fail)?;
     let (g_steps, d_steps) = state.optimizer_steps;
     opt_g.restore(tensors, "opt_g.", g_steps).map_err(fail)?;
-    critic.opt.restore(tensors, "opt_d.", d_steps).map_err(fail)?;
+    critic
+        .opt
+        .restore(tensors, "opt_d.", d_steps)
+        .map_err(fail)?;
     Ok(())
 }
 
@@ -343,7 +380,12 @@ fn check_same_config(saved: &TrainConfig, wanted: &TrainConfig, path: &Path) -> 
             fields
                 .iter()
                 .filter(|(k, v)| b.get(k.as_str()) != Some(v))
-                .map(|(k, v)| format!("{k} (checkpoint {v}, requested {})", b.get(k.as_str()).cloned().unwrap_or_default()))
+                .map(|(k, v)| {
+                    format!(
+                        "{k} (checkpoint {v}, requested {})",
+                        b.get(k.as_str()).cloned().unwrap_or_default()
+                    )
+                })
                 .collect()
         })
         .unwrap_or_default();

@@ -69,9 +69,13 @@ impl<'a> VolumeScale<'a> {
         rng: &mut impl Rng,
     ) -> Result<Self> {
         let config = model.config();
-        let renderer = ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth);
+        let renderer =
+            ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth);
         let real = if config.use_depth {
-            Tensor::cat(&[&level.images, &(&level.depths / f64::from(depth_norm))?], 1)?
+            Tensor::cat(
+                &[&level.images, &(&level.depths / f64::from(depth_norm))?],
+                1,
+            )?
         } else {
             level.images.clone()
         };
@@ -82,7 +86,11 @@ impl<'a> VolumeScale<'a> {
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
         let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
         let prev_reconstruction = if n >= 2 {
-            Some(model.generate(&model.reconstruction_noise(n - 1)?)?.detach())
+            Some(
+                model
+                    .generate(&model.reconstruction_noise(n - 1)?)?
+                    .detach(),
+            )
         } else {
             None
         };
@@ -147,15 +155,26 @@ impl<'a> VolumeScale<'a> {
 }
 
 impl Stage for VolumeScale<'_> {
-    fn iteration(&mut self, adversarial: bool, rng: &mut rand_chacha::ChaCha8Rng) -> Result<StepLosses> {
+    fn iteration(
+        &mut self,
+        adversarial: bool,
+        rng: &mut rand_chacha::ChaCha8Rng,
+    ) -> Result<StepLosses> {
         let mut losses = StepLosses::default();
         let views = self.views();
-        let draw = if adversarial { Some(self.draw(rng)?) } else { None };
+        let draw = if adversarial {
+            Some(self.draw(rng)?)
+        } else {
+            None
+        };
         if let Some(draw) = &draw {
             let fake_volume = self.fake_volume(draw)?.detach();
             let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
             for _ in 0..self.config.d_steps {
-                let real = select(&self.real, &pick_views(rng, views, self.config.views_per_step))?;
+                let real = select(
+                    &self.real,
+                    &pick_views(rng, views, self.config.views_per_step),
+                )?;
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let fake = self
                     .renderer
@@ -184,7 +203,8 @@ impl Stage for VolumeScale<'_> {
             let (rgb, depth) = self
                 .renderer
                 .render(&self.reconstruction()?, &self.cameras(&rec_views))?;
-            let color = (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
+            let color =
+                (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
             total = (total + color)?;
             if let Some(depth) = depth {
@@ -202,11 +222,18 @@ impl Stage for VolumeScale<'_> {
         Ok(losses)
     }
 
-    fn picture_rows(&self, rng: &mut rand_chacha::ChaCha8Rng, count: usize) -> Result<Vec<Vec<Tensor>>> {
+    fn picture_rows(
+        &self,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        count: usize,
+    ) -> Result<Vec<Vec<Tensor>>> {
         let camera = [&self.level.cameras[0]];
         let mut row = vec![
             self.level.images.get(0)?,
-            self.renderer.render(&self.reconstruction()?.detach(), &camera)?.0.get(0)?,
+            self.renderer
+                .render(&self.reconstruction()?.detach(), &camera)?
+                .0
+                .get(0)?,
         ];
         for _ in 0..count {
             let fake = self.fake_volume(&self.draw(rng)?)?.detach();
