@@ -178,3 +178,36 @@ fn train_and_sample_report_bad_input_clearly() {
         "{err}"
     );
 }
+
+#[test]
+fn scene_writes_a_loadable_dataset_and_rejects_unknown_names() {
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["stones", "mushrooms", "islands"] {
+        let dir = tmp.path().join(name);
+        let text = ok(&volgen(&[
+            "scene",
+            name,
+            "--out",
+            path(&dir),
+            "--views",
+            "4",
+            "--resolution",
+            "16",
+            "--grid",
+            "24",
+        ]));
+        assert!(
+            text.contains("wrote 4 views") && text.contains("transforms.json"),
+            "{text}"
+        );
+        let data = singrav::dataset::Dataset::load(&dir, [1.0; 3]).unwrap();
+        assert_eq!((data.len(), data.width(), data.height()), (4, 16, 16));
+    }
+    let bad = volgen(&["scene", "volcano", "--out", path(tmp.path())]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("volcano") && err.contains("mushrooms") && err.contains("islands"),
+        "{err}"
+    );
+}

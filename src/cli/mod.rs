@@ -9,6 +9,7 @@ mod export;
 mod info;
 mod render;
 mod sample;
+mod scene;
 mod train;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.
@@ -27,6 +28,8 @@ enum Command {
     Export(export::ExportArgs),
     /// Render a volume from the cameras of a transforms.json to EXR (R, G, B, A, Z) and PNG.
     Render(render::RenderArgs),
+    /// Render a built-in scene (stones, mushrooms, islands) into an RGB-D transforms.json dataset.
+    Scene(scene::SceneArgs),
     /// Train SinGRAV on a transforms.json RGB-D dataset (progress bar, log, checkpoints).
     Train(train::TrainArgs),
     /// Generate new scenes from a trained model: volumes, VDB/EXR on request, PNG views.
@@ -45,6 +48,7 @@ pub fn run() -> ExitCode {
         Command::Info(args) => info::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Render(args) => render::run(&args),
+        Command::Scene(args) => scene::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),
         Command::Demo(args) => demo::run(&args),

@@ -300,9 +300,7 @@ impl TrainConfig {
         let density_ok = self.density_scale.is_finite()
             && self.density_scale > 0.0
             && self.density_shift.is_finite();
-        if !density_ok
-            || self.background.iter().any(|c| !(0.0..=1.0).contains(c))
-        {
+        if !density_ok || self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
             return Err(invalid(
                 "density_scale / density_shift / background",
                 "need a positive density scale, a finite shift and a background in [0, 1]",

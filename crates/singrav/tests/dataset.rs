@@ -7,7 +7,7 @@ use candle_core::{Device, Tensor};
 use radiance_volume::GridDims;
 use serde_json::Value;
 use singrav::dataset::{render_config, write_dataset, Dataset, DatasetSpec, DEPTH_SCALE};
-use singrav::scenes::{Scene, SceneKind};
+use singrav::scenes::SceneKind;
 use volrender::{render_image, Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 
 const SPEC: DatasetSpec = DatasetSpec {
@@ -233,15 +233,15 @@ fn broken_camera_matrices_name_the_frame() {
         "{msg}"
     );
 
-    // NaN as Python's json module writes it.
+    // NaN as Python's json module writes it: put a marker where the NaN goes, then swap it in.
     let path = dir.path().join("transforms.json");
-    let json: Value = serde_json::from_str(&original).unwrap();
-    let first = json["frames"][5]["transform_matrix"][0][0].to_string();
-    let entry = format!("\"file_path\": \"images/r_005.png\"");
-    let at = original.find(&entry).unwrap();
-    let (head, tail) = original.split_at(at);
-    let tail = tail.replacen(&first, "NaN", 1);
-    std::fs::write(&path, format!("{head}{tail}")).unwrap();
+    std::fs::write(&path, &original).unwrap();
+    edit_transforms(dir.path(), |json| {
+        json["frames"][5]["transform_matrix"][0][0] = 12345.5.into();
+    });
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert_eq!(text.matches("12345.5").count(), 1);
+    std::fs::write(&path, text.replace("12345.5", "NaN")).unwrap();
     let msg = load_error(dir.path());
     assert!(
         msg.contains("images/r_005.png") && msg.contains("finite"),
