@@ -7,9 +7,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use candle_core::Tensor;
 use serde::Serialize;
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::dataset::{write_dataset, DatasetSpec};
+use singrav::sample::Sample;
 use singrav::scenes::SceneKind;
 use singrav::SinGrav;
 
@@ -49,6 +51,8 @@ struct Summary {
     scale_peak_mib: Vec<Option<f64>>,
     final_losses: Vec<serde_json::Value>,
     generation_seconds: Vec<f64>,
+    /// The paper's Diversity-MV of the samples against the input views they are shown beside.
+    diversity_mv: Option<f64>,
     overview: PathBuf,
     dataset: PathBuf,
     model: PathBuf,
@@ -119,7 +123,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         outputs,
     )?;
     let overview = args.out.join("overview.png");
-    write_overview(&overview, &model, &dataset, input_views, &samples)?;
+    let real = input_views_at_sample_size(&model, &dataset, input_views, &samples)?;
+    write_overview(&overview, &real, &samples)?;
+    let generated: Vec<_> = samples.iter().map(|s| s.views.clone()).collect();
+    let diversity_mv = (samples.len() >= 2)
+        .then(|| singrav::metrics::diversity_mv(&generated, &real))
+        .transpose()?;
 
     let summary = Summary {
         scene: args.scene.name().into(),
@@ -130,6 +139,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         scale_peak_mib: state.scale_peak_mib.clone(),
         final_losses: last_losses_per_scale(&run_dir)?,
         generation_seconds: samples.iter().map(|s| s.generation_seconds).collect(),
+        diversity_mv,
         overview: overview.clone(),
         dataset: dataset_dir,
         model: run_dir.clone(),
@@ -149,31 +159,33 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 }
 
 /// Input views in the top row, each generated scene from the same cameras below.
-fn write_overview(
-    path: &Path,
-    model: &SinGrav,
-    dataset: &singrav::dataset::Dataset,
-    views: usize,
-    samples: &[singrav::sample::Sample],
-) -> Result<()> {
-    let size = samples
-        .first()
-        .map(|s| s.views.dim(3))
-        .transpose()?
-        .unwrap_or(model.render_size());
-    let level = dataset.level(size, size, model.device())?;
-    let mut rows = vec![(0..views)
-        .map(|v| level.images.get(v))
-        .collect::<candle_core::Result<Vec<_>>>()?];
+fn write_overview(path: &Path, real: &Tensor, samples: &[Sample]) -> Result<()> {
+    let row = |views: &Tensor| -> Result<Vec<Tensor>> {
+        Ok((0..views.dim(0)?)
+            .map(|v| views.get(v))
+            .collect::<candle_core::Result<Vec<_>>>()?)
+    };
+    let mut rows = vec![row(real)?];
     for sample in samples {
-        rows.push(
-            (0..views)
-                .map(|v| sample.views.get(v))
-                .collect::<candle_core::Result<Vec<_>>>()?,
-        );
+        rows.push(row(&sample.views)?);
     }
     singrav::picture::write_grid(path, &rows)?;
     Ok(())
+}
+
+/// The first `views` dataset images at the size of the samples' renderings, `(V, 3, H, W)`.
+fn input_views_at_sample_size(
+    model: &SinGrav,
+    dataset: &singrav::dataset::Dataset,
+    views: usize,
+    samples: &[Sample],
+) -> Result<Tensor> {
+    let size = match samples.first() {
+        Some(s) => s.views.dim(3)?,
+        None => model.render_size(),
+    };
+    let level = dataset.level(size, size, model.device())?;
+    Ok(level.images.narrow(0, 0, views)?)
 }
 
 /// The last logged losses of every scale.
@@ -250,6 +262,12 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
         .map(|s| format!("{s:.3}"))
         .collect();
     writeln!(md, "\nGeneration time per scene (s): {}", times.join(", "))?;
+    if let Some(d) = summary.diversity_mv {
+        writeln!(
+            md,
+            "\nDiversity-MV of the samples over the overview's views: {d:.3}"
+        )?;
+    }
     write_text(&dir.join("summary.md"), &md)
 }
 

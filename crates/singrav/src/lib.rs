@@ -1,14 +1,42 @@
 //! SinGRAV: learning a generative radiance volume from multi-view RGB-D images of a single
 //! natural scene (Wang, Chen and Chen).
 //!
-//! This crate is being built: so far it holds the built-in procedural scenes ([`scenes`]), which
-//! give the project training data without any download. The model, training and sampling follow.
+//! - [`scenes`]: built-in procedural scenes (stones, mushrooms, islands), so the project needs
+//!   no download; [`dataset`] renders them into, and loads, NeRF-style RGB-D datasets.
+//! - [`TrainConfig`]: presets (`paper`, `small`, `tiny`, `micro`) and ablation switches.
+//! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
+//! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
+//! - [`sample`]: new scenes from a trained model; [`applications`]: edit harmonisation and
+//!   animation; [`metrics`]: Diversity-MV.
+//!
+//! ```no_run
+//! use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+//! use singrav::scenes::StandingStones;
+//! use singrav::train::{train, Control, TrainOutcome};
+//! use singrav::TrainConfig;
+//! // The gradient penalty differentiates a gradient: set before any backward pass.
+//! std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
+//! let dir = std::path::Path::new("data/stones");
+//! write_dataset(&StandingStones::new(0), dir, &DatasetSpec::default())?;
+//! let config = TrainConfig::preset("tiny")?;
+//! let data = Dataset::load(dir, config.background)?;
+//! let device = candle_core::Device::Cpu;
+//! let outcome = train(&config, &data, "runs/stones".as_ref(), false, &device, &mut |_| Control::Continue)?;
+//! if let TrainOutcome::Finished(model) = outcome {
+//!     let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+//!     let scene = model.sample(&mut rand::rng(), &cameras)?;
+//!     scene.volume.save_safetensors("scene.safetensors")?;
+//! }
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
+pub mod applications;
 pub mod checkpoint;
 pub mod config;
 pub mod dataset;
 mod error;
 mod io;
+pub mod metrics;
 pub mod model;
 pub mod noise;
 pub mod optim;
