@@ -9,6 +9,7 @@ use patch_gan::{
     PatchDiscriminator2dConfig,
 };
 
+use super::volume_scale::{pick_views, select};
 use crate::config::TrainConfig;
 use crate::error::{Error, Result};
 use crate::model::{copy_matching, named_vars, seeded_init};
@@ -77,6 +78,29 @@ impl Critic {
         let total = (&loss + &gp)?;
         self.opt.step(&total.backward()?)?;
         Ok((loss.to_scalar::<f32>()?, gp.to_scalar::<f32>()?))
+    }
+
+    /// The critic's part of an iteration: `config.d_steps` steps, each on `views_per_step`
+    /// random real views against the fake batch `fake_batch(views)` of as many random views;
+    /// returns the mean critic loss and penalty.
+    pub fn steps(
+        &mut self,
+        config: &TrainConfig,
+        real: &Tensor,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        fake_batch: impl Fn(&[usize]) -> Result<Tensor>,
+    ) -> Result<(f32, f32)> {
+        let views = real.dim(0)?;
+        let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
+        for _ in 0..config.d_steps {
+            let real = select(real, &pick_views(rng, views, config.views_per_step))?;
+            let fake = fake_batch(&pick_views(rng, views, config.views_per_step))?;
+            let (c, p) = self.step(&real, &fake, config.gp_weight, rng)?;
+            critic_sum += c;
+            penalty_sum += p;
+        }
+        let steps = config.d_steps as f32;
+        Ok((critic_sum / steps, penalty_sum / steps))
     }
 
     /// The generator's adversarial loss on a fake batch (differentiable).

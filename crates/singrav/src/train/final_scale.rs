@@ -104,14 +104,24 @@ impl<'a> FinalScale<'a> {
 
     /// Renderings `(V, 3, h, w)` of `volume` from `views`.
     fn fake_rendering(&self, volume: &Tensor, views: &[usize]) -> Result<Tensor> {
-        let cameras: Vec<_> = views.iter().map(|&v| &self.coarse.cameras[v]).collect();
-        Ok(self.renderer.render(volume, &cameras)?.0)
+        render_views(&self.renderer, volume, &self.coarse.cameras, views)
     }
+}
 
-    /// The joint critic input `[G_N(x), up(x)]`.
-    fn joint(&self, upsampled: &Tensor, coarse: &Tensor) -> Result<Tensor> {
-        Ok(Tensor::cat(&[upsampled, &upsample_bilinear2x(coarse)?], 1)?)
-    }
+/// Colour renderings `(V, 3, h, w)` of `volume` from `cameras[views]`.
+fn render_views(
+    renderer: &ViewRenderer,
+    volume: &Tensor,
+    cameras: &[volrender::Camera],
+    views: &[usize],
+) -> Result<Tensor> {
+    let cameras: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
+    Ok(renderer.render(volume, &cameras)?.0)
+}
+
+/// The joint critic input `[G_N(x), up(x)]`.
+fn joint(upsampled: &Tensor, coarse: &Tensor) -> Result<Tensor> {
+    Ok(Tensor::cat(&[upsampled, &upsample_bilinear2x(coarse)?], 1)?)
 }
 
 impl Stage for FinalScale<'_> {
@@ -128,22 +138,13 @@ impl Stage for FinalScale<'_> {
             None
         };
         if let Some(volume) = &fake_volume {
-            let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
-            for _ in 0..self.config.d_steps {
-                let real = select(
-                    &self.real,
-                    &pick_views(rng, views, self.config.views_per_step),
-                )?;
-                let fake_views = pick_views(rng, views, self.config.views_per_step);
-                let coarse = self.fake_rendering(volume, &fake_views)?;
-                let fake = self.joint(&self.model.upsample_images(&coarse)?, &coarse)?;
-                let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
-                critic_sum += c;
-                penalty_sum += p;
-            }
-            let steps = self.config.d_steps as f32;
-            losses.critic = Some(critic_sum / steps);
-            losses.penalty = Some(penalty_sum / steps);
+            let (model, renderer, cameras) = (self.model, &self.renderer, &self.coarse.cameras);
+            let (critic, penalty) = self.critic.steps(self.config, &self.real, rng, |views| {
+                let coarse = render_views(renderer, volume, cameras, views)?;
+                joint(&model.upsample_images(&coarse)?, &coarse)
+            })?;
+            losses.critic = Some(critic);
+            losses.penalty = Some(penalty);
         }
         let (mut adversarial_sum, mut color_sum, mut swd_sum) = (0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
@@ -152,9 +153,7 @@ impl Stage for FinalScale<'_> {
                 let fake_views = pick_views(rng, views, self.config.views_per_step);
                 let coarse = self.fake_rendering(volume, &fake_views)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
-                let adv = self
-                    .critic
-                    .generator_loss(&self.joint(&upsampled, &coarse)?)?;
+                let adv = self.critic.generator_loss(&joint(&upsampled, &coarse)?)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
                 if let Some(texture) = &self.texture {

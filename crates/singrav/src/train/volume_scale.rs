@@ -169,23 +169,13 @@ impl Stage for VolumeScale<'_> {
         };
         if let Some(draw) = &draw {
             let fake_volume = self.fake_volume(draw)?.detach();
-            let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
-            for _ in 0..self.config.d_steps {
-                let real = select(
-                    &self.real,
-                    &pick_views(rng, views, self.config.views_per_step),
-                )?;
-                let fake_views = pick_views(rng, views, self.config.views_per_step);
-                let fake = self
-                    .renderer
-                    .render_joined(&fake_volume, &self.cameras(&fake_views))?;
-                let (c, p) = self.critic.step(&real, &fake, self.config.gp_weight, rng)?;
-                critic_sum += c;
-                penalty_sum += p;
-            }
-            let steps = self.config.d_steps as f32;
-            losses.critic = Some(critic_sum / steps);
-            losses.penalty = Some(penalty_sum / steps);
+            let (renderer, cameras) = (&self.renderer, &self.level.cameras);
+            let (critic, penalty) = self.critic.steps(self.config, &self.real, rng, |views| {
+                let cams: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
+                renderer.render_joined(&fake_volume, &cams)
+            })?;
+            losses.critic = Some(critic);
+            losses.penalty = Some(penalty);
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
