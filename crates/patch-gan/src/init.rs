@@ -1,6 +1,8 @@
 //! PyTorch's default initialisation of convolution layers.
 
-use candle_nn::{Conv2d, Conv2dConfig, Init, VarBuilder};
+use candle_nn::{Init, VarBuilder};
+
+use crate::conv2d::Conv2d;
 
 /// The weight and bias initialisers PyTorch's `ConvNd.reset_parameters` uses for a layer whose
 /// weight has `fan_in = in_channels * kernel volume` inputs per output.
@@ -35,9 +37,5 @@ pub(crate) fn torch_conv2d(
         w_init,
     )?;
     let bias = vb.get_with_hints(out_channels, "bias", b_init)?;
-    let config = Conv2dConfig {
-        padding,
-        ..Default::default()
-    };
-    Ok(Conv2d::new(weight, Some(bias), config))
+    Ok(Conv2d::new(weight, bias, padding))
 }

@@ -36,6 +36,7 @@
 //! # Ok::<(), patch_gan::Error>(())
 //! ```
 
+mod conv2d;
 mod conv3d;
 mod discriminator;
 mod error;
