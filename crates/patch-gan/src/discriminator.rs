@@ -1,9 +1,7 @@
 //! `PatchDiscriminator2d`: the paper's 2D patch critic D_n.
 
 use candle_core::{Module, Tensor};
-use candle_nn::VarBuilder;
-
-use crate::conv2d::Conv2d;
+use candle_nn::{Conv2d, VarBuilder};
 
 use crate::error::{invalid, Result};
 use crate::init::torch_conv2d;

@@ -1,8 +1,6 @@
 //! PyTorch's default initialisation of convolution layers.
 
-use candle_nn::{Init, VarBuilder};
-
-use crate::conv2d::Conv2d;
+use candle_nn::{Conv2d, Conv2dConfig, Init, VarBuilder};
 
 /// The weight and bias initialisers PyTorch's `ConvNd.reset_parameters` uses for a layer whose
 /// weight has `fan_in = in_channels * kernel volume` inputs per output.
@@ -37,5 +35,9 @@ pub(crate) fn torch_conv2d(
         w_init,
     )?;
     let bias = vb.get_with_hints(out_channels, "bias", b_init)?;
-    Ok(Conv2d::new(weight, bias, padding))
+    let config = Conv2dConfig {
+        padding,
+        ..Default::default()
+    };
+    Ok(Conv2d::new(weight, Some(bias), config))
 }

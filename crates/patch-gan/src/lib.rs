@@ -36,7 +36,6 @@
 //! # Ok::<(), patch_gan::Error>(())
 //! ```
 
-mod conv2d;
 mod conv3d;
 mod discriminator;
 mod error;

@@ -1,9 +1,7 @@
 //! `Upsampler2d`: the paper's final-scale 2D generator G_N, doubling the last rendering.
 
 use candle_core::{Module, Tensor};
-use candle_nn::VarBuilder;
-
-use crate::conv2d::Conv2d;
+use candle_nn::{Conv2d, VarBuilder};
 
 use crate::error::{invalid, Result};
 use crate::init::torch_conv2d;
