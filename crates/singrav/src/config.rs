@@ -176,8 +176,9 @@ impl TrainConfig {
                 ..scaled("small", 5, 24, 32)
             }),
             "tiny" => Ok(Self {
-                iterations: 100,
-                reconstruction_only: 25,
+                iterations: 60,
+                reconstruction_only: 15,
+                views_per_step: 2,
                 learning_rate: 1e-3,
                 checkpoint_seconds: 60,
                 ..scaled("tiny", 4, 16, 24)
