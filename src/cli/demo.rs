@@ -273,11 +273,8 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
 
 /// Writes a text file atomically.
 fn write_text(path: &Path, text: &str) -> Result<()> {
-    radiance_volume::io::write_atomic(path, |w| {
-        std::io::Write::write_all(w, text.as_bytes()).map_err(|source| radiance_volume::Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })
-    })?;
-    Ok(())
+    Ok(radiance_volume::io::write_bytes_atomic(
+        path,
+        text.as_bytes(),
+    )?)
 }

@@ -12,16 +12,6 @@ use singrav::render::ViewRenderer;
 use singrav::sample::showcase_cameras;
 use singrav::{SinGrav, TrainConfig};
 
-fn peak_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            let line = s.lines().find(|l| l.starts_with("VmHWM:"))?.to_string();
-            line.split_whitespace().nth(1)?.parse::<f64>().ok()
-        })
-        .map_or(f64::NAN, |kib| kib / 1024.0)
-}
-
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let preset = args.next().unwrap_or_else(|| "paper".into());
@@ -61,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let render = started.elapsed().as_secs_f64();
         println!(
             "| {n} | {size}^3 | {image}^2 | {generator:.2} | {render:.2} | {:.0} |",
-            peak_mib()
+            singrav::train::peak_memory_mib().unwrap_or(f64::NAN)
         );
     }
     Ok(())

@@ -1,6 +1,5 @@
 //! File helpers shared by checkpoints, pictures and logs.
 
-use std::io::Write;
 use std::path::Path;
 
 use crate::error::{io_error, Result};
@@ -8,14 +7,7 @@ use crate::error::{io_error, Result};
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename), so
 /// an interrupted write never leaves a partial file under the user's name.
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    radiance_volume::io::write_atomic(path, |w| {
-        w.write_all(bytes)
-            .map_err(|source| radiance_volume::Error::Io {
-                path: path.to_path_buf(),
-                source,
-            })
-    })?;
-    Ok(())
+    Ok(radiance_volume::io::write_bytes_atomic(path, bytes)?)
 }
 
 /// Creates `dir` and its parents, naming it on failure.

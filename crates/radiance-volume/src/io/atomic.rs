@@ -44,6 +44,19 @@ pub fn write_atomic(
     result
 }
 
+/// Writes `bytes` to `path` atomically (see [`write_atomic`]).
+///
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// let path = dir.path().join("hello.txt");
+/// radiance_volume::io::write_bytes_atomic(&path, b"hi")?;
+/// assert_eq!(std::fs::read(&path)?, b"hi");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |w| w.write_all(bytes).map_err(io_error(path)))
+}
+
 /// Checks, before any expensive work, that a file can be created in `path`'s directory (the
 /// directory exists and is writable), by creating and removing a temporary file there.
 pub fn check_writable(path: &Path) -> Result<()> {

@@ -33,7 +33,7 @@ use half::f16;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::atomic::{check_writable, write_atomic};
+use super::atomic::{check_writable, write_atomic, write_bytes_atomic};
 use crate::error::{beyond_half, invalid, io_error, Error, Result};
 use crate::grid::{Aabb, GridDims};
 use crate::volume::RadianceVolume;
@@ -251,9 +251,7 @@ impl ExrSlicesWriter<'_> {
                 channels,
             };
             let json = serde_json::to_vec_pretty(&sidecar).expect("the sidecar serialises");
-            write_atomic(&sidecar_path, |w| {
-                std::io::Write::write_all(w, &json).map_err(io_error(&sidecar_path))
-            })
+            write_bytes_atomic(&sidecar_path, &json)
         });
         if let Err(e) = result {
             paths.iter().for_each(|p| {

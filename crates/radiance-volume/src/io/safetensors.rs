@@ -2,14 +2,13 @@
 //! optional string metadata (see `docs/formats.md`).
 
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use safetensors::{Dtype, SafeTensors};
 
-use super::atomic::write_atomic;
+use super::atomic::write_bytes_atomic;
 use crate::error::{io_error, Error, Result};
 use crate::grid::Aabb;
 use crate::volume::{default_channel_names, validate_channel_names, RadianceVolume};
@@ -35,9 +34,7 @@ impl RadianceVolume {
     /// Saves the volume as safetensors, atomically (a temporary file renamed into place).
     pub fn save_safetensors(&self, path: impl AsRef<Path>) -> Result<()> {
         let bytes = self.to_safetensors_bytes()?;
-        write_atomic(path.as_ref(), |w| {
-            w.write_all(&bytes).map_err(io_error(path.as_ref()))
-        })
+        write_bytes_atomic(path.as_ref(), &bytes)
     }
 
     /// Serialises the volume to safetensors bytes.

@@ -15,6 +15,21 @@ use serde::Serialize;
 
 pub use run::{train, TrainOutcome};
 
+/// The process's peak resident memory in MiB (Linux `VmHWM`), if the OS reports it; recorded
+/// per scale in checkpoints.
+///
+/// ```
+/// if let Some(mib) = singrav::train::peak_memory_mib() {
+///     assert!(mib > 0.0);
+/// }
+/// ```
+pub fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
 /// What an observer tells the trainer after a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Control {

@@ -124,8 +124,25 @@ pub fn train(
         let mut stage: Box<dyn Stage + '_> = if n < config.scales() {
             let size = config.image_sizes[n - 1];
             let level = dataset.level(size, size, device)?;
+            // The frozen reconstruction V*_{n-1}: it sets the noise amplitude and the scale
+            // reconstructs on top of it.
+            let prev_reconstruction = if n >= 2 {
+                Some(
+                    model
+                        .generate(&model.reconstruction_noise(n - 1)?)?
+                        .detach(),
+                )
+            } else {
+                None
+            };
             if fresh {
-                let amp = noise_amplitude(&model, n, &level, state.depth_norm)?;
+                let amp = noise_amplitude(
+                    &model,
+                    n,
+                    &level,
+                    state.depth_norm,
+                    prev_reconstruction.as_ref(),
+                )?;
                 model.push_generator(amp, &mut setup)?;
                 state.noise_amps.push(amp);
             }
@@ -134,6 +151,7 @@ pub fn train(
                 n,
                 level,
                 state.depth_norm,
+                prev_reconstruction,
                 previous,
                 &mut setup,
             )?)
@@ -204,7 +222,7 @@ pub fn train(
         previous_critic = var_tensors(&stage.parts().0.vars);
         drop(stage);
         state.scale_seconds.push(state.current_seconds);
-        state.scale_peak_mib.push(peak_memory_mib());
+        state.scale_peak_mib.push(super::peak_memory_mib());
         state.current_seconds = 0.0;
         state.scale = n + 1;
         state.iteration = 0;
@@ -244,21 +262,19 @@ fn depth_norm(dataset: &Dataset) -> f32 {
 }
 
 /// The noise amplitude of a new scale n: the first scale's is fixed; above, SinGAN's rule
-/// `factor * RMSE(render(up(V*_{n-1})), x_n)`.
+/// `factor * RMSE(render(up(V*_{n-1})), x_n)` with `prev` the reconstruction `V*_{n-1}`.
 fn noise_amplitude(
     model: &SinGrav,
     n: usize,
     level: &crate::dataset::DatasetLevel,
     depth_norm: f32,
+    prev: Option<&Tensor>,
 ) -> Result<f64> {
     let config = model.config();
-    if n == 1 {
+    let Some(prev) = prev else {
         return Ok(config.noise_amp_first);
-    }
-    let coarse = model
-        .generate(&model.reconstruction_noise(n - 1)?)?
-        .detach();
-    let up = model.upsample_to_scale(&coarse, n)?;
+    };
+    let up = model.upsample_to_scale(prev, n)?;
     let renderer = ViewRenderer::new(config, config.samples[n - 1], depth_norm, false);
     Ok(config.noise_amp_factor * reconstruction_rmse(&renderer, &up, level, AMPLITUDE_VIEWS)?)
 }
@@ -396,12 +412,4 @@ fn check_same_config(saved: &TrainConfig, wanted: &TrainConfig, path: &Path) -> 
             differing.join(", ")
         ),
     })
-}
-
-/// The process's peak resident memory in MiB (Linux `VmHWM`), if the OS reports it.
-fn peak_memory_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
 }

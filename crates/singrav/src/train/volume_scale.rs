@@ -59,12 +59,14 @@ pub(super) fn mse(a: &Tensor, b: &Tensor) -> Result<Tensor> {
 }
 
 impl<'a> VolumeScale<'a> {
-    /// Sets up scale `n` (its generator already pushed onto `model`).
+    /// Sets up scale `n` (its generator already pushed onto `model`) on top of the frozen
+    /// reconstruction `V*_{n-1}` (`None` at n = 1).
     pub fn new(
         model: &'a SinGrav,
         n: usize,
         level: DatasetLevel,
         depth_norm: f32,
+        prev_reconstruction: Option<Tensor>,
         previous_critic: Option<&HashMap<String, Tensor>>,
         rng: &mut impl Rng,
     ) -> Result<Self> {
@@ -85,15 +87,6 @@ impl<'a> VolumeScale<'a> {
             .generator_vars(n)
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
         let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
-        let prev_reconstruction = if n >= 2 {
-            Some(
-                model
-                    .generate(&model.reconstruction_noise(n - 1)?)?
-                    .detach(),
-            )
-        } else {
-            None
-        };
         Ok(Self {
             model,
             config,

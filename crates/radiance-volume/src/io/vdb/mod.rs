@@ -42,7 +42,7 @@ use candle_core::Tensor;
 use self::bytes::PutBytes;
 use self::meta::{MetaValue, Transform, COMPRESS_ACTIVE_MASK, COMPRESS_ZIP};
 use self::tree::{Encoding, GridValues, Topology};
-use super::atomic::{check_writable, write_atomic};
+use super::atomic::{check_writable, write_bytes_atomic};
 use crate::error::{invalid, io_error, Error, Result};
 use crate::volume::RadianceVolume;
 
@@ -135,7 +135,7 @@ impl<'a> VdbWriter<'a> {
         let path = path.as_ref();
         check_writable(path)?;
         let (bytes, stats) = self.encode()?;
-        write_atomic(path, |w| w.write_all(&bytes).map_err(io_error(path)))?;
+        write_bytes_atomic(path, &bytes)?;
         Ok(stats)
     }
 
