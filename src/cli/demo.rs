@@ -92,10 +92,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     // A run left by an earlier demo with the same settings is continued, not overwritten.
     let resume = args.train.resume || run_dir.join(CHECKPOINT_FILE).exists();
     println!(
-        "2/3 training the `{}` preset ({} scales x {} iterations){} -> {}",
+        "2/3 training the `{}` preset ({} scales, {} iterations){} -> {}",
         config.preset,
         config.scales(),
-        config.iterations,
+        config.total_iterations(),
         if resume { ", resuming" } else { "" },
         run_dir.display()
     );

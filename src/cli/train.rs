@@ -42,7 +42,8 @@ pub struct TrainOptions {
     /// Ablation: train without depth supervision.
     #[arg(long)]
     pub no_depth: bool,
-    /// Iterations per scale (default: the preset's).
+    /// Iterations at every scale, the first quarter reconstruction-only (default: the preset's
+    /// schedule).
     #[arg(long, value_name = "N")]
     pub iterations: Option<usize>,
     /// Seed of every random draw.
@@ -58,8 +59,7 @@ impl TrainOptions {
             config = config.with_scales(scales)?;
         }
         if let Some(iterations) = self.iterations {
-            config.iterations = iterations;
-            config.reconstruction_only = iterations / 4;
+            config = config.with_iterations(iterations);
         }
         config.use_swd &= !self.no_swd;
         config.use_csg &= !self.no_csg;
@@ -92,7 +92,7 @@ pub fn train_with_progress(
     run_dir: &Path,
     resume: bool,
 ) -> Result<Box<SinGrav>> {
-    let total = (config.scales() * config.iterations) as u64;
+    let total = config.total_iterations() as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
     bar.set_style(
         ProgressStyle::with_template(
@@ -102,7 +102,7 @@ pub fn train_with_progress(
         .progress_chars("=> "),
     );
     let mut observer = |p: &Progress| {
-        bar.set_position(((p.scale - 1) * p.iterations + p.iteration) as u64);
+        bar.set_position((config.iterations_before(p.scale) + p.iteration) as u64);
         match &p.event {
             Event::Step => bar.set_message(format!(
                 "scale {}/{} step {}/{} {}",

@@ -1,3 +1,3 @@
 mod benchmarks;
 
-criterion::criterion_main!(benchmarks::conv3d::benches);
+criterion::criterion_main!(benchmarks::conv3d::benches, benchmarks::critic::benches);

@@ -1,10 +1,10 @@
 //! `PatchDiscriminator2d`: the paper's 2D patch critic D_n.
 
 use candle_core::{Module, Tensor};
-use candle_nn::{Conv2d, VarBuilder};
+use candle_nn::VarBuilder;
 
+use crate::conv::{conv2d, Conv2d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::init::torch_conv2d;
 use crate::norm::{leaky_relu, LEAKY_SLOPE};
 
 /// Kernel size of every discriminator layer.
@@ -108,16 +108,22 @@ impl PatchDiscriminator2d {
                 } else {
                     config.channels
                 };
-                torch_conv2d(
+                conv2d(
                     c_in,
                     config.channels,
                     KERNEL,
-                    0,
+                    ConvConfig::default(),
                     vb.pp("blocks").pp(i).pp("conv"),
                 )
             })
-            .collect::<candle_core::Result<Vec<_>>>()?;
-        let tail = torch_conv2d(config.channels, 1, KERNEL, 0, vb.pp("tail"))?;
+            .collect::<Result<Vec<_>>>()?;
+        let tail = conv2d(
+            config.channels,
+            1,
+            KERNEL,
+            ConvConfig::default(),
+            vb.pp("tail"),
+        )?;
         Ok(Self {
             blocks,
             tail,

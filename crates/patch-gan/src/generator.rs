@@ -3,7 +3,7 @@
 use candle_core::{ModuleT, Tensor};
 use candle_nn::{Module, VarBuilder};
 
-use crate::conv3d::{conv3d, Conv3d, Conv3dConfig};
+use crate::conv::{conv3d, Conv3d, ConvConfig};
 use crate::error::{invalid, Result};
 use crate::norm::{batch_norm3d, leaky_relu, BatchNorm3d, LEAKY_SLOPE};
 
@@ -118,7 +118,7 @@ impl Generator3d {
     /// Builds (or loads) the generator's tensors under `vb`.
     pub fn new(config: &Generator3dConfig, vb: VarBuilder) -> Result<Self> {
         config.validate()?;
-        let conv_cfg = Conv3dConfig::default().with_padding(config.kernel / 2);
+        let conv_cfg = ConvConfig::default().with_padding(config.kernel / 2);
         let blocks = (0..config.layers - 1)
             .map(|i| {
                 let vb = vb.pp("blocks").pp(i);

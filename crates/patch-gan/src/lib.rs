@@ -2,7 +2,9 @@
 //! discriminator, the final 2D upsampler, and WGAN-GP losses.
 //!
 //! candle has no 3D convolution; [`Conv3d`] (and [`functional::conv3d`]) fills that gap on the CPU
-//! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight.
+//! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight. The
+//! same kernel runs [`Conv2d`] ([`functional::conv2d`]), which the critics and the upsampler use:
+//! faster than candle's CPU conv2d, and differentiable to any order (the gradient penalty).
 //!
 //! Conventions:
 //! - Volumes are `(N, C, D, H, W)` (D along z, H along y, W along x), images `(N, C, H, W)`.
@@ -36,7 +38,7 @@
 //! # Ok::<(), patch_gan::Error>(())
 //! ```
 
-mod conv3d;
+mod conv;
 mod discriminator;
 mod error;
 mod generator;
@@ -47,10 +49,10 @@ mod wgan;
 
 /// Stateless ops, named after `torch.nn.functional`.
 pub mod functional {
-    pub use crate::conv3d::op::{conv3d, conv3d_by_slices};
+    pub use crate::conv::op::{conv2d, conv3d, conv3d_by_slices};
 }
 
-pub use conv3d::{conv3d, conv3d_no_bias, Conv3d, Conv3dConfig};
+pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv2d, Conv3d, ConvConfig};
 pub use discriminator::{receptive_field, PatchDiscriminator2d, PatchDiscriminator2dConfig};
 pub use error::{Error, Result};
 pub use generator::{Generator3d, Generator3dConfig};

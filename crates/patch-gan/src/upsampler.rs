@@ -1,10 +1,10 @@
 //! `Upsampler2d`: the paper's final-scale 2D generator G_N, doubling the last rendering.
 
 use candle_core::{Module, Tensor};
-use candle_nn::{Conv2d, VarBuilder};
+use candle_nn::VarBuilder;
 
+use crate::conv::{conv2d, Conv2d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::init::torch_conv2d;
 use crate::norm::{leaky_relu, InstanceNorm2d, LEAKY_SLOPE};
 
 /// Shape of an [`Upsampler2d`]; the default is the paper's table "G_N": 3 image channels and
@@ -71,14 +71,15 @@ impl Upsampler2d {
             return Err(invalid("Upsampler2d channels", "must be positive"));
         }
         let [w0, ..] = config.widths;
-        let up = torch_conv2d(config.channels, SCALE * SCALE * w0, 3, 1, vb.pp("up"))?;
+        let same = ConvConfig::default().with_padding(1);
+        let up = conv2d(config.channels, SCALE * SCALE * w0, 3, same, vb.pp("up"))?;
         let blocks = config
             .widths
             .windows(2)
             .enumerate()
-            .map(|(i, w)| torch_conv2d(w[0], w[1], 3, 1, vb.pp("blocks").pp(i).pp("conv")))
-            .collect::<candle_core::Result<Vec<_>>>()?;
-        let tail = torch_conv2d(config.widths[3], config.channels, 3, 1, vb.pp("tail"))?;
+            .map(|(i, w)| conv2d(w[0], w[1], 3, same, vb.pp("blocks").pp(i).pp("conv")))
+            .collect::<Result<Vec<_>>>()?;
+        let tail = conv2d(config.widths[3], config.channels, 3, same, vb.pp("tail"))?;
         Ok(Self {
             up,
             blocks,

@@ -38,12 +38,8 @@ pub struct TrainConfig {
     pub channels: usize,
     /// Feature widths of the upsampler G_N (32, 16, 8, 8 in the paper).
     pub upsampler_widths: [usize; 4],
-    /// Training iterations per scale (one iteration = `d_steps` critic steps, then `g_steps`
-    /// generator steps).
-    pub iterations: usize,
-    /// The first iterations of each scale train the reconstruction only (a quarter, as the
-    /// paper's 20 of 80 epochs).
-    pub reconstruction_only: usize,
+    /// Iterations of each scale, coarsest first, the upsampler last (one entry per scale).
+    pub schedule: Vec<ScaleSchedule>,
     /// Critic steps per iteration (3).
     pub d_steps: usize,
     /// Generator steps per iteration (3).
@@ -86,6 +82,36 @@ pub struct TrainConfig {
     /// Seed of every random draw: weights, noises, views, penalties, projections.
     pub seed: u64,
 }
+
+/// How long one scale trains. One iteration is `d_steps` critic steps, then `g_steps`
+/// generator steps; the first `reconstruction_only` iterations skip the critic and train the
+/// reconstruction alone (a quarter in the presets, as the paper's 20 of 80 epochs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ScaleSchedule {
+    /// Iterations of the scale.
+    pub iterations: usize,
+    /// The first iterations that train the reconstruction only.
+    pub reconstruction_only: usize,
+}
+
+impl ScaleSchedule {
+    /// `iterations` iterations, the first quarter reconstruction-only.
+    pub fn quarter_reconstruction(iterations: usize) -> Self {
+        Self {
+            iterations,
+            reconstruction_only: iterations / 4,
+        }
+    }
+}
+
+/// The same schedule for all `scales` scales.
+fn uniform_schedule(iterations: usize, scales: usize) -> Vec<ScaleSchedule> {
+    vec![ScaleSchedule::quarter_reconstruction(iterations); scales]
+}
+
+/// Iterations per scale of the `tiny` preset: the coarse scales, which are cheap and form the
+/// scene's layout, train longest; the finer ones refine it (see docs/training.md for the times).
+const TINY_ITERATIONS: [usize; 4] = [240, 160, 60, 40];
 
 /// The volume grows by 4/3 per scale.
 const VOLUME_GROWTH: f64 = 4.0 / 3.0;
@@ -134,8 +160,7 @@ impl TrainConfig {
             layers: 5,
             channels: 32,
             upsampler_widths: [32, 16, 8, 8],
-            iterations: 2000,
-            reconstruction_only: 500,
+            schedule: uniform_schedule(2000, 6),
             d_steps: 3,
             g_steps: 3,
             views_per_step: 1,
@@ -170,14 +195,14 @@ impl TrainConfig {
         match name {
             "paper" => Ok(paper),
             "small" => Ok(Self {
-                iterations: 600,
-                reconstruction_only: 150,
+                schedule: uniform_schedule(600, 5),
                 checkpoint_seconds: 180,
                 ..scaled("small", 5, 24, 32)
             }),
             "tiny" => Ok(Self {
-                iterations: 60,
-                reconstruction_only: 15,
+                schedule: TINY_ITERATIONS
+                    .map(ScaleSchedule::quarter_reconstruction)
+                    .to_vec(),
                 views_per_step: 2,
                 learning_rate: 1e-3,
                 checkpoint_seconds: 60,
@@ -188,8 +213,7 @@ impl TrainConfig {
                 channels: 4,
                 upsampler_widths: [4, 4, 4, 4],
                 samples: vec![16, 16],
-                iterations: 4,
-                reconstruction_only: 1,
+                schedule: uniform_schedule(4, 3),
                 d_steps: 1,
                 g_steps: 1,
                 checkpoint_seconds: 0,
@@ -215,6 +239,30 @@ impl TrainConfig {
         2 * self.image_sizes.last().copied().unwrap_or(0)
     }
 
+    /// The schedule of scale `n` (1-based).
+    ///
+    /// # Panics
+    /// If `n` is not a scale of this configuration (see [`TrainConfig::validate`]).
+    pub fn scale_schedule(&self, n: usize) -> ScaleSchedule {
+        self.schedule[n - 1]
+    }
+
+    /// Iterations of all scales before scale `n` (1-based).
+    pub fn iterations_before(&self, n: usize) -> usize {
+        self.schedule[..n - 1].iter().map(|s| s.iterations).sum()
+    }
+
+    /// Iterations of the whole run.
+    pub fn total_iterations(&self) -> usize {
+        self.iterations_before(self.schedule.len() + 1)
+    }
+
+    /// The same `iterations` at every scale, the first quarter reconstruction-only.
+    pub fn with_iterations(mut self, iterations: usize) -> Self {
+        self.schedule = uniform_schedule(iterations, self.scales());
+        self
+    }
+
     /// The ablation "number of scales": keeps the `scales - 1` coarsest 3D scales and the
     /// upsampler, so the final images shrink with the pyramid.
     pub fn with_scales(mut self, scales: usize) -> Result<Self> {
@@ -232,6 +280,10 @@ impl TrainConfig {
         self.volume_sizes.truncate(scales - 1);
         self.image_sizes.truncate(scales - 1);
         self.samples.truncate(scales - 1);
+        if let Some(&upsampler) = self.schedule.last() {
+            self.schedule.truncate(scales - 1);
+            self.schedule.push(upsampler);
+        }
         Ok(self)
     }
 
@@ -268,20 +320,32 @@ impl TrainConfig {
                 "need at least 2 layers and positive widths",
             ));
         }
-        if self.iterations == 0 || self.d_steps == 0 || self.g_steps == 0 {
+        if self.schedule.len() != n + 1 {
             return Err(invalid(
-                "iterations / d_steps / g_steps",
-                "must be positive",
-            ));
-        }
-        if self.reconstruction_only > self.iterations {
-            return Err(invalid(
-                "reconstruction_only",
+                "schedule",
                 format!(
-                    "{} exceeds the {} iterations per scale",
-                    self.reconstruction_only, self.iterations
+                    "needs one entry per scale ({}), has {}",
+                    n + 1,
+                    self.schedule.len()
                 ),
             ));
+        }
+        if self.d_steps == 0 || self.g_steps == 0 {
+            return Err(invalid("d_steps / g_steps", "must be positive"));
+        }
+        for (i, s) in self.schedule.iter().enumerate() {
+            if s.iterations == 0 || s.reconstruction_only > s.iterations {
+                return Err(invalid(
+                    "schedule",
+                    format!(
+                        "scale {}: needs at least one iteration and no more reconstruction-only \
+                         iterations than iterations, has {} of {}",
+                        i + 1,
+                        s.reconstruction_only,
+                        s.iterations
+                    ),
+                ));
+            }
         }
         let weights = [
             self.learning_rate,

@@ -46,6 +46,6 @@ pub mod sample;
 pub mod scenes;
 pub mod train;
 
-pub use config::TrainConfig;
+pub use config::{ScaleSchedule, TrainConfig};
 pub use error::{Error, Result};
 pub use model::SinGrav;

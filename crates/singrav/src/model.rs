@@ -66,6 +66,22 @@ pub(crate) fn copy_matching(from: &HashMap<String, Tensor>, to: &VarMap) -> Resu
     Ok(())
 }
 
+/// Zeroes the last layer (`tail.weight`, `tail.bias`) of a residual network, so it starts as
+/// the identity on what it refines: a new G_n (n >= 2) outputs exactly the upsampled coarser
+/// volume, and the upsampler exactly the bilinear upsample. With few iterations per scale this
+/// keeps the coarser scale's layout from the first step, instead of spending the scale on
+/// undoing the disturbance that a residual copied from the previous scale (or drawn at random)
+/// adds; the layers before the tail keep their initialisation and start learning after the
+/// tail's first update.
+pub(crate) fn zero_residual(map: &VarMap) -> Result<()> {
+    for (name, var) in named_vars(map) {
+        if name.starts_with("tail.") {
+            var.set(&var.as_tensor().zeros_like()?)?;
+        }
+    }
+    Ok(())
+}
+
 /// Re-draws every convolution's weight and bias from `rng` with PyTorch's default bounds
 /// `U(-1/sqrt(fan_in), 1/sqrt(fan_in))` (what patch-gan's layers use), so a run's initial
 /// weights follow from its seed; candle's own initialisers draw from an unseeded generator.
@@ -196,6 +212,7 @@ impl SinGrav {
         seeded_init(&map, rng)?;
         if let Some((_, previous)) = self.generators.last() {
             copy_matching(&var_tensors(previous), &map)?;
+            zero_residual(&map)?;
         }
         self.generators.push((generator, map.clone()));
         self.noise_amps.push(amp);
@@ -214,6 +231,7 @@ impl SinGrav {
             VarBuilder::from_varmap(&map, DType::F32, &self.device),
         )?;
         seeded_init(&map, rng)?;
+        zero_residual(&map)?;
         self.upsampler = Some((upsampler, map.clone()));
         Ok(map)
     }

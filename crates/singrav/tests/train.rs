@@ -10,7 +10,7 @@ use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
 use singrav::scenes::StandingStones;
 use singrav::train::{train, Control, Event, Progress, StepLosses, TrainOutcome};
-use singrav::{Error, SinGrav, TrainConfig};
+use singrav::{Error, ScaleSchedule, SinGrav, TrainConfig};
 
 /// A small dataset of the stones scene at the micro preset's final resolution.
 fn dataset(dir: &Path) -> Dataset {
@@ -77,7 +77,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let config = micro();
     let run = tmp.path().join("run");
     let (model, steps) = run_to_end(&config, &data, &run);
-    assert_eq!(steps.len(), config.scales() * config.iterations);
+    assert_eq!(steps.len(), config.total_iterations());
     for (scale, l) in &steps {
         let terms = [
             l.critic,
@@ -138,13 +138,21 @@ fn reconstruction_loss_falls() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
     let config = TrainConfig {
-        iterations: 16,
-        reconstruction_only: 16,
         g_steps: 2,
         ..micro()
     }
     .with_scales(2)
     .unwrap();
+    let config = TrainConfig {
+        schedule: vec![
+            ScaleSchedule {
+                iterations: 16,
+                reconstruction_only: 16
+            };
+            2
+        ],
+        ..config
+    };
     let (_, steps) = run_to_end(&config, &data, &tmp.path().join("run"));
     let colour: Vec<f32> = steps
         .iter()
@@ -230,7 +238,7 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     );
     // The resumed log reads as one run: every (scale, iteration) once.
     let log = std::fs::read_to_string(killed.join("log.jsonl")).unwrap();
-    assert_eq!(log.lines().count(), config.scales() * config.iterations);
+    assert_eq!(log.lines().count(), config.total_iterations());
 }
 
 #[test]
@@ -314,8 +322,13 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
     let config = TrainConfig {
-        iterations: 2,
-        reconstruction_only: 1,
+        schedule: vec![
+            ScaleSchedule {
+                iterations: 2,
+                reconstruction_only: 1
+            };
+            4
+        ],
         volume_sizes: vec![8, 11, 14],
         image_sizes: vec![12, 18, 24],
         samples: vec![16, 16, 16],
@@ -363,4 +376,37 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
     assert_eq!(dist(&out, &again), 0.0);
     assert!(model.harmonize(&edited, 3, &mut rng).is_err());
     assert!(model.harmonize(&edited, 0, &mut rng).is_err());
+}
+
+#[test]
+fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
+    let config = micro();
+    let device = Device::Cpu;
+    let mut rng = singrav::noise::step_rng(0, 0, 0);
+    let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
+    model.push_generator(1.0, &mut rng).unwrap();
+    let coarse = model.coarsest(model.z_star()).unwrap();
+    model.push_generator(0.1, &mut rng).unwrap();
+    let size = config.volume_sizes[1];
+    let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
+    let refined = model.refine(2, &z, &coarse).unwrap();
+    let upsampled = model.upsample_to_scale(&coarse, 2).unwrap();
+    let diff = (refined - upsampled)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap();
+    assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+    model.push_upsampler(&mut rng).unwrap();
+    let images = Tensor::rand(0f32, 1., (2, 3, 6, 5), &device).unwrap();
+    let doubled = model.upsample_images(&images).unwrap();
+    let bilinear = patch_gan::upsample_bilinear2x(&images).unwrap();
+    let diff = (doubled - bilinear)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap();
+    assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
 }

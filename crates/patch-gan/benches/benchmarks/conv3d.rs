@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use candle_core::{Device, Tensor, Var};
 use criterion::{BenchmarkId, Criterion, Throughput};
-use patch_gan::{functional, Conv3dConfig};
+use patch_gan::{functional, ConvConfig};
 
 const CHANNELS: usize = 32;
 const KERNEL: usize = 3;
@@ -33,7 +33,7 @@ fn inputs(size: usize) -> (Tensor, Tensor) {
 }
 
 fn conv3d_forward(c: &mut Criterion) {
-    let cfg = Conv3dConfig::default().with_padding(1);
+    let cfg = ConvConfig::default().with_padding(1);
     let mut group = c.benchmark_group("gan/conv3d_fwd");
     group.sample_size(10).warm_up_time(Duration::from_secs(1));
     for size in SIZES {
@@ -47,7 +47,7 @@ fn conv3d_forward(c: &mut Criterion) {
 }
 
 fn conv3d_forward_backward(c: &mut Criterion) {
-    let cfg = Conv3dConfig::default().with_padding(1);
+    let cfg = ConvConfig::default().with_padding(1);
     let mut group = c.benchmark_group("gan/conv3d_fwd_bwd");
     group.sample_size(10).warm_up_time(Duration::from_secs(1));
     for size in SIZES {

@@ -1,1 +1,2 @@
 pub mod conv3d;
+pub mod critic;

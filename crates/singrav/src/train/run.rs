@@ -169,11 +169,12 @@ pub fn train(
             restore_stage(stage.as_mut(), tensors, &state, &checkpoint_file, device)?;
         }
         let mut last_checkpoint = Instant::now();
-        while state.iteration < config.iterations {
+        let schedule = config.scale_schedule(n);
+        while state.iteration < schedule.iterations {
             let it = state.iteration;
             let started = Instant::now();
             let losses = stage.iteration(
-                it >= config.reconstruction_only,
+                it >= schedule.reconstruction_only,
                 &mut step_rng(config.seed, n, it),
             )?;
             check_finite(&losses, n, it)?;
@@ -184,7 +185,7 @@ pub fn train(
                 scale: n,
                 scales: config.scales(),
                 iteration: state.iteration,
-                iterations: config.iterations,
+                iterations: schedule.iterations,
                 losses,
                 scale_seconds: state.current_seconds,
                 total_seconds: total_seconds(&state),
@@ -197,7 +198,7 @@ pub fn train(
                 && last_checkpoint.elapsed().as_secs() >= config.checkpoint_seconds;
             let due_by_count = config.checkpoint_iterations > 0
                 && state.iteration % config.checkpoint_iterations == 0;
-            if state.iteration < config.iterations && (due_by_time || due_by_count) {
+            if state.iteration < schedule.iterations && (due_by_time || due_by_count) {
                 save(
                     &checkpoint_file,
                     config,
@@ -231,8 +232,8 @@ pub fn train(
         let progress = Progress {
             scale: n,
             scales: config.scales(),
-            iteration: config.iterations,
-            iterations: config.iterations,
+            iteration: schedule.iterations,
+            iterations: schedule.iterations,
             losses: StepLosses::default(),
             scale_seconds: *state.scale_seconds.last().unwrap_or(&0.0),
             total_seconds: total_seconds(&state),

@@ -1,7 +1,9 @@
-//! CPU kernels of the 3D convolution: forward, input gradient and weight gradient.
+//! CPU kernels of the convolution: forward, input gradient and weight gradient.
 //!
-//! All three work on chunks of output rows (an output row is the `W_out` voxels of one `(n, d, h)`).
-//! For each chunk a small im2col matrix `cols` of shape `(C_in k^3, rows * W_out)` is filled from the
+//! Every convolution here is 3D with a per-axis kernel and padding; a 2D one is a 3D one with
+//! depth 1 and a kernel one tap deep. All three kernels work on chunks of output rows (an output
+//! row is the `W_out` voxels of one `(n, d, h)`). For each chunk a small im2col matrix `cols` of
+//! shape `(C_in kd kh kw, rows * W_out)` is filled from the
 //! input (zeros where the kernel overhangs the padding) and handed to `gemm`. The chunk is sized so
 //! that `cols` stays in the L2 cache, which is what makes this faster than a whole-volume im2col
 //! (27x the input, far beyond any cache) followed by one large matrix product.
@@ -27,7 +29,7 @@ impl Element for f64 {
     const ONE: Self = 1.0;
 }
 
-/// Shape of one batched 3D convolution with a cubic kernel.
+/// Shape of one batched 3D convolution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Geometry {
     pub batch: usize,
@@ -35,8 +37,10 @@ pub(crate) struct Geometry {
     pub c_out: usize,
     /// Input `[D, H, W]`.
     pub input: [usize; 3],
-    pub kernel: usize,
-    pub padding: usize,
+    /// Kernel taps `[kd, kh, kw]`.
+    pub kernel: [usize; 3],
+    /// Zeros before and after each of `[D, H, W]`.
+    pub padding: [usize; 3],
     pub stride: usize,
 }
 
@@ -46,12 +50,11 @@ const COLS_TARGET_ELEMS: usize = 1 << 18;
 impl Geometry {
     /// Output `[D, H, W]`; callers have checked `n + 2 padding >= kernel` on every axis.
     pub fn output(&self) -> [usize; 3] {
-        self.input
-            .map(|n| (n + 2 * self.padding - self.kernel) / self.stride + 1)
+        [0, 1, 2].map(|a| (self.input[a] + 2 * self.padding[a] - self.kernel[a]) / self.stride + 1)
     }
 
     fn taps(&self) -> usize {
-        self.kernel.pow(3)
+        self.kernel.iter().product()
     }
 
     /// Length of one im2col column: every input channel times every kernel tap.
@@ -127,33 +130,35 @@ fn copy_row<T: Element>(seg: &mut [T], src: &[T], tap: usize, padding: usize, st
 }
 
 /// Fills `cols` (`patch_len` rows of `rows * W_out` values) for output rows `row0..row0 + rows` of
-/// the batch item `x_n` (`C_in x D x H x W`). Row `r = (c k + kd) k^2 + kh k + kw` of `cols` matches
-/// the weight layout `(C_out, C_in, kd, kh, kw)`.
+/// the batch item `x_n` (`C_in x D x H x W`). Row `r = ((c kd + td) kh + th) kw + tw` of `cols`
+/// matches the weight layout `(C_out, C_in, kd, kh, kw)`.
 fn fill_cols<T: Element>(cols: &mut [T], x_n: &[T], g: &Geometry, row0: usize, rows: usize) {
     let [d_in, h_in, w_in] = g.input;
     let [_, h_out, w_out] = g.output();
-    let (k, p, s) = (g.kernel, g.padding, g.stride);
+    let ([_, kh, kw], [pd, ph, pw], s) = (g.kernel, g.padding, g.stride);
     let nc = rows * w_out;
     for (r, dst) in cols.chunks_exact_mut(nc).enumerate() {
-        let kw = r % k;
-        let kh = (r / k) % k;
-        let kd = (r / (k * k)) % k;
+        let tap = r % g.taps();
+        let (td, th, tw) = (tap / (kh * kw), (tap / kw) % kh, tap % kw);
         let x_c = &x_n[(r / g.taps()) * g.in_voxels()..];
         for (t, seg) in dst.chunks_exact_mut(w_out).enumerate() {
             let (od, oh) = ((row0 + t) / h_out, (row0 + t) % h_out);
-            let (id, ih) = ((s * od + kd).wrapping_sub(p), (s * oh + kh).wrapping_sub(p));
+            let (id, ih) = (
+                (s * od + td).wrapping_sub(pd),
+                (s * oh + th).wrapping_sub(ph),
+            );
             // Wrapped (negative) indices are huge, so one comparison covers both sides.
             if id >= d_in || ih >= h_in {
                 seg.fill(T::ZERO);
             } else {
                 let start = (id * h_in + ih) * w_in;
-                copy_row(seg, &x_c[start..start + w_in], kw, p, s);
+                copy_row(seg, &x_c[start..start + w_in], tw, pw, s);
             }
         }
     }
 }
 
-/// `y = conv3d(x, w)` without bias. `x` is `(N, C_in, D, H, W)`, `w` is `(C_out, C_in, k, k, k)`,
+/// `y = conv3d(x, w)` without bias. `x` is `(N, C_in, D, H, W)`, `w` is `(C_out, C_in, kd, kh, kw)`,
 /// the result `(N, C_out, D_out, H_out, W_out)`, all contiguous.
 pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     let (in_vox, out_vox, patch) = (g.in_voxels(), g.out_voxels(), g.patch_len());
@@ -199,7 +204,7 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     out
 }
 
-/// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `w`: shape `(C_out, C_in, k, k, k)`.
+/// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `w`: shape `(C_out, C_in, kd, kh, kw)`.
 pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> Vec<T> {
     let (in_vox, out_vox, patch) = (g.in_voxels(), g.out_voxels(), g.patch_len());
     let w_out = g.output()[2];
@@ -261,10 +266,10 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
 pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     let (k, s) = (g.kernel, g.stride);
     let out = g.output();
-    let grid = g.input.map(|n| n + k - 1);
+    let grid = [0, 1, 2].map(|a| g.input[a] + k[a] - 1);
     let grid_vox: usize = grid.iter().product();
     let out_vox = g.out_voxels();
-    let shift = (k - 1) as isize - g.padding as isize;
+    let shift = [0, 1, 2].map(|a| (k[a] - 1) as isize - g.padding[a] as isize);
     let mut scattered = vec![T::ZERO; g.batch * g.c_out * grid_vox];
     scattered
         .par_chunks_mut(grid_vox)
@@ -272,7 +277,7 @@ pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> V
         .for_each(|(dst, src)| {
             for (i, &v) in src.iter().enumerate() {
                 let o = [i / (out[1] * out[2]), (i / out[2]) % out[1], i % out[2]];
-                let pos = [0, 1, 2].map(|a| (s * o[a]) as isize + shift);
+                let pos = [0, 1, 2].map(|a| (s * o[a]) as isize + shift[a]);
                 // With padding > k - 1 an output can see padding only; its gradient reaches no input.
                 if pos
                     .iter()
@@ -299,7 +304,7 @@ pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> V
         c_out: g.c_in,
         input: grid,
         kernel: k,
-        padding: 0,
+        padding: [0; 3],
         stride: 1,
     };
     forward(&scattered, &flipped, &transposed)

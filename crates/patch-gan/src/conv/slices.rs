@@ -11,10 +11,11 @@ use crate::error::{invalid, Result};
 /// differentiates on every device candle's conv2d supports. `g` comes from `geometry`.
 pub(crate) fn conv3d_by_slices(xs: &Tensor, kernel: &Tensor, g: &Geometry) -> Result<Tensor> {
     let [d_out, _, _] = g.output();
-    let (n, p, s) = (g.batch, g.padding, g.stride);
+    // `conv3d` gives every axis the same padding.
+    let (n, p, s) = (g.batch, g.padding[0], g.stride);
     let padded = xs.pad_with_zeros(2, p, p)?;
     let mut sum: Option<Tensor> = None;
-    for kd in 0..g.kernel {
+    for kd in 0..g.kernel[0] {
         let depths: Vec<u32> = (0..d_out).map(|z| (kd + z * s) as u32).collect();
         let index = Tensor::from_vec(depths, d_out, xs.device())?;
         // (N, C_in, D_out, H, W) -> (N * D_out, C_in, H, W)

@@ -1,0 +1,379 @@
+//! The candle custom ops around the CPU kernels, and the public functional `conv3d` / `conv2d`.
+//!
+//! The three ops (forward, input gradient, kernel gradient) are the three partial derivatives of
+//! one trilinear form `B(x, w, g) = <conv(x, w), g>`, so the backward of each is made of the other
+//! two. Their backward passes build tracked tensors, which makes gradients of any order available
+//! (the WGAN-GP penalty differentiates the critic's input gradient with respect to its weights).
+
+use candle_core::backend::BackendStorage;
+use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
+
+use super::cpu::{self, Geometry};
+use super::ConvConfig;
+use crate::error::{invalid, Result};
+
+/// 3D cross-correlation of `xs` `(N, C_in, D, H, W)` with `kernel` `(C_out, C_in, kd, kh, kw)`,
+/// as PyTorch's `torch.nn.functional.conv3d(xs, kernel, stride=cfg.stride, padding=cfg.padding)`.
+///
+/// The output is `(N, C_out, D_out, H_out, W_out)` with `D_out = (D + 2 padding - kd) / stride + 1`
+/// (and likewise for H, W). It is differentiable with respect to both arguments, to any order;
+/// f32 and f64 run on the CPU kernel, other devices on candle's conv2d over depth slices.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use patch_gan::{functional, ConvConfig};
+/// let x = Tensor::ones((1, 2, 4, 4, 4), candle_core::DType::F32, &Device::Cpu)?;
+/// let k = Tensor::ones((3, 2, 3, 3, 3), candle_core::DType::F32, &Device::Cpu)?;
+/// let y = functional::conv3d(&x, &k, ConvConfig { padding: 1, stride: 1 })?;
+/// assert_eq!(y.dims(), &[1, 3, 4, 4, 4]);
+/// // The centre voxel sees 2 channels x 27 taps of ones.
+/// assert_eq!(y.get(0)?.get(0)?.get(1)?.get(1)?.get(1)?.to_scalar::<f32>()?, 54.0);
+/// # Ok::<(), patch_gan::Error>(())
+/// ```
+pub fn conv3d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
+    let spec = Spec::uniform(cfg);
+    let g = geometry(xs.shape(), kernel.shape(), spec)?;
+    if !xs.device().is_cpu() {
+        return super::slices::conv3d_by_slices(xs, kernel, &g);
+    }
+    Ok(apply(xs, kernel, ConvOp(spec))?)
+}
+
+/// 2D cross-correlation of `xs` `(N, C_in, H, W)` with `kernel` `(C_out, C_in, kh, kw)`, as
+/// PyTorch's `torch.nn.functional.conv2d(xs, kernel, stride=cfg.stride, padding=cfg.padding)`.
+///
+/// On the CPU this runs the same chunked im2col + `gemm` kernel as [`conv3d`] (a 2D convolution
+/// is a 3D one of depth 1) and is differentiable to any order; on other devices it is candle's
+/// own `conv2d`. candle 0.11's CPU conv2d is a direct loop whose backward pass is a slow
+/// transposed convolution: this op is several times faster for the critics' small kernels (see
+/// `cargo bench -p patch-gan`).
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use patch_gan::{functional, ConvConfig};
+/// let x = Tensor::rand(-1f32, 1., (2, 3, 9, 7), &Device::Cpu)?;
+/// let k = Tensor::rand(-1f32, 1., (4, 3, 3, 3), &Device::Cpu)?;
+/// let ours = functional::conv2d(&x, &k, ConvConfig::default().with_padding(1))?;
+/// let candle = x.conv2d(&k, 1, 1, 1, 1)?;
+/// assert_eq!(ours.dims(), &[2, 4, 9, 7]);
+/// let diff = (ours - candle)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+/// assert!(diff < 1e-5);
+/// # Ok::<(), patch_gan::Error>(())
+/// ```
+pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
+    let (n, c_in, h, w) = xs.dims4().map_err(|_| {
+        invalid(
+            "input",
+            format!("expected (N, C, H, W), got {:?}", xs.shape()),
+        )
+    })?;
+    let (c_out, kc_in, kh, kw) = kernel.dims4().map_err(|_| {
+        invalid(
+            "kernel",
+            format!("expected (C_out, C_in, kh, kw), got {:?}", kernel.shape()),
+        )
+    })?;
+    if !xs.device().is_cpu() {
+        return Ok(xs.conv2d(kernel, cfg.padding, cfg.stride, 1, 1)?);
+    }
+    let spec = Spec {
+        padding: [0, cfg.padding, cfg.padding],
+        stride: cfg.stride,
+    };
+    let xs = xs.reshape((n, c_in, 1, h, w))?;
+    let kernel = kernel.reshape((c_out, kc_in, 1, kh, kw))?;
+    let g = geometry(xs.shape(), kernel.shape(), spec)?;
+    let [_, h_out, w_out] = g.output();
+    Ok(apply(&xs, &kernel, ConvOp(spec))?.reshape((n, c_out, h_out, w_out))?)
+}
+
+/// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public
+/// so tests and benchmarks can compare it with the CPU kernel.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use patch_gan::{functional, ConvConfig};
+/// let x = Tensor::rand(-1f32, 1., (1, 2, 5, 4, 3), &Device::Cpu)?;
+/// let k = Tensor::rand(-1f32, 1., (3, 2, 3, 3, 3), &Device::Cpu)?;
+/// let cfg = ConvConfig { padding: 1, stride: 1 };
+/// let a = functional::conv3d(&x, &k, cfg)?;
+/// let b = functional::conv3d_by_slices(&x, &k, cfg)?;
+/// let diff = (a - b)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+/// assert!(diff < 1e-5);
+/// # Ok::<(), patch_gan::Error>(())
+/// ```
+pub fn conv3d_by_slices(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
+    let g = geometry(xs.shape(), kernel.shape(), Spec::uniform(cfg))?;
+    super::slices::conv3d_by_slices(xs, kernel, &g)
+}
+
+/// The parameters every op carries: zero padding per axis `[D, H, W]` and the stride.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Spec {
+    padding: [usize; 3],
+    stride: usize,
+}
+
+impl Spec {
+    /// The same padding on every axis.
+    fn uniform(cfg: ConvConfig) -> Self {
+        Self {
+            padding: [cfg.padding; 3],
+            stride: cfg.stride,
+        }
+    }
+}
+
+/// Checks the shapes and returns the geometry of `conv(xs, kernel)`.
+fn geometry(xs: &Shape, kernel: &Shape, spec: Spec) -> Result<Geometry> {
+    let &[batch, c_in, d, h, w] = xs.dims() else {
+        return Err(invalid(
+            "input",
+            format!("expected (N, C, D, H, W), got {xs:?}"),
+        ));
+    };
+    let &[c_out, kc_in, kd, kh, kw] = kernel.dims() else {
+        return Err(invalid(
+            "kernel",
+            format!("expected (C_out, C_in, kd, kh, kw), got {kernel:?}"),
+        ));
+    };
+    if [c_out, kd, kh, kw].contains(&0) {
+        return Err(invalid(
+            "kernel",
+            format!("needs at least one output channel and one tap per axis, got {kernel:?}"),
+        ));
+    }
+    if kc_in != c_in {
+        return Err(invalid(
+            "kernel",
+            format!("kernel {kernel:?} expects {kc_in} input channels, input {xs:?} has {c_in}"),
+        ));
+    }
+    if spec.stride == 0 {
+        return Err(invalid("stride", "must be at least 1"));
+    }
+    let (input, taps) = ([d, h, w], [kd, kh, kw]);
+    if (0..3).any(|a| input[a] + 2 * spec.padding[a] < taps[a]) {
+        return Err(invalid(
+            "input",
+            format!(
+                "input {xs:?} with padding {:?} is smaller than the kernel {taps:?}",
+                spec.padding
+            ),
+        ));
+    }
+    Ok(Geometry {
+        batch,
+        c_in,
+        c_out,
+        input,
+        kernel: taps,
+        padding: spec.padding,
+        stride: spec.stride,
+    })
+}
+
+/// Applies one of the ops to contiguous copies of its arguments, tracking the graph.
+fn apply(
+    a: &Tensor,
+    b: &Tensor,
+    op: impl CustomOp2 + Send + Sync + 'static,
+) -> candle_core::Result<Tensor> {
+    a.contiguous()?.apply_op2(&b.contiguous()?, op)
+}
+
+/// The contiguous data of a storage, or an error naming the op.
+fn data<'a, T>(values: &'a [T], layout: &Layout, op: &'static str) -> candle_core::Result<&'a [T]> {
+    match layout.contiguous_offsets() {
+        Some((start, end)) => Ok(&values[start..end]),
+        None => candle_core::bail!("{op}: inputs have to be contiguous"),
+    }
+}
+
+/// Runs a two-input kernel on f32 or f64 storages of the same dtype, after checking that the
+/// first input has `first_len` elements (the op's geometry comes from the other shapes).
+fn run<F32, F64>(
+    name: &'static str,
+    (s1, l1): (&CpuStorage, &Layout),
+    (s2, l2): (&CpuStorage, &Layout),
+    first_len: usize,
+    f32_kernel: F32,
+    f64_kernel: F64,
+) -> candle_core::Result<CpuStorage>
+where
+    F32: FnOnce(&[f32], &[f32]) -> Vec<f32>,
+    F64: FnOnce(&[f64], &[f64]) -> Vec<f64>,
+{
+    if l1.shape().elem_count() != first_len {
+        candle_core::bail!(
+            "{name}: first input {:?} has {} elements, the geometry needs {first_len}",
+            l1.shape(),
+            l1.shape().elem_count()
+        );
+    }
+    match (s1, s2) {
+        (CpuStorage::F32(a), CpuStorage::F32(b)) => Ok(CpuStorage::F32(f32_kernel(
+            data(a, l1, name)?,
+            data(b, l2, name)?,
+        ))),
+        (CpuStorage::F64(a), CpuStorage::F64(b)) => Ok(CpuStorage::F64(f64_kernel(
+            data(a, l1, name)?,
+            data(b, l2, name)?,
+        ))),
+        (CpuStorage::F32(_) | CpuStorage::F64(_), other) => {
+            Err(candle_core::Error::DTypeMismatchBinaryOp {
+                lhs: s1.dtype(),
+                rhs: other.dtype(),
+                op: name,
+            })
+        }
+        _ => Err(candle_core::Error::UnsupportedDTypeForOp(s1.dtype(), name)),
+    }
+}
+
+fn checked(x: &Shape, kernel: &Shape, spec: Spec) -> candle_core::Result<Geometry> {
+    geometry(x, kernel, spec).map_err(candle_core::Error::from)
+}
+
+/// `(N, C_out, D_out, H_out, W_out)` of a geometry.
+fn output_shape(g: &Geometry) -> Shape {
+    let [d, h, w] = g.output();
+    Shape::from((g.batch, g.c_out, d, h, w))
+}
+
+/// Forward op: `(x, kernel) -> y`.
+struct ConvOp(Spec);
+
+impl CustomOp2 for ConvOp {
+    fn name(&self) -> &'static str {
+        "conv"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let g = checked(l1.shape(), l2.shape(), self.0)?;
+        let len = l1.shape().elem_count();
+        let out = run(
+            self.name(),
+            (s1, l1),
+            (s2, l2),
+            len,
+            |x, k| cpu::forward(x, k, &g),
+            |x, k| cpu::forward(x, k, &g),
+        )?;
+        Ok((out, output_shape(&g)))
+    }
+
+    fn bwd(
+        &self,
+        xs: &Tensor,
+        kernel: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let grad_xs = apply(grad, kernel, GradInputOp(self.0, xs.shape().clone()))?;
+        let grad_kernel = apply(xs, grad, GradKernelOp(self.0, kernel.shape().clone()))?;
+        Ok((Some(grad_xs), Some(grad_kernel)))
+    }
+}
+
+/// Input gradient: `(grad_out, kernel) -> grad_x` for an input of the stored shape.
+struct GradInputOp(Spec, Shape);
+
+impl CustomOp2 for GradInputOp {
+    fn name(&self) -> &'static str {
+        "conv-grad-input"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let g = checked(&self.1, l2.shape(), self.0)?;
+        let len = output_shape(&g).elem_count();
+        let out = run(
+            self.name(),
+            (s1, l1),
+            (s2, l2),
+            len,
+            |go, k| cpu::grad_input(go, k, &g),
+            |go, k| cpu::grad_input(go, k, &g),
+        )?;
+        Ok((out, self.1.clone()))
+    }
+
+    /// `grad_x` is linear in both arguments: its derivative along `grad_out` is the forward
+    /// convolution, along the kernel the kernel gradient.
+    fn bwd(
+        &self,
+        grad_out: &Tensor,
+        kernel: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let along_grad_out = apply(grad, kernel, ConvOp(self.0))?;
+        let along_kernel = apply(grad, grad_out, GradKernelOp(self.0, kernel.shape().clone()))?;
+        Ok((Some(along_grad_out), Some(along_kernel)))
+    }
+}
+
+/// Kernel gradient: `(x, grad_out) -> grad_kernel` for a kernel of the stored shape.
+struct GradKernelOp(Spec, Shape);
+
+impl CustomOp2 for GradKernelOp {
+    fn name(&self) -> &'static str {
+        "conv-grad-kernel"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let g = checked(l1.shape(), &self.1, self.0)?;
+        if l2.shape().elem_count() != output_shape(&g).elem_count() {
+            candle_core::bail!(
+                "{}: output gradient {:?} does not match the output {:?}",
+                self.name(),
+                l2.shape(),
+                output_shape(&g)
+            );
+        }
+        let len = l1.shape().elem_count();
+        let out = run(
+            self.name(),
+            (s1, l1),
+            (s2, l2),
+            len,
+            |x, go| cpu::grad_weight(x, go, &g),
+            |x, go| cpu::grad_weight(x, go, &g),
+        )?;
+        Ok((out, self.1.clone()))
+    }
+
+    /// `grad_kernel` is linear in both arguments: its derivative along `x` is the input
+    /// gradient of `grad_out` through the incoming kernel-shaped gradient, along `grad_out` the
+    /// forward convolution of `x` with it.
+    fn bwd(
+        &self,
+        xs: &Tensor,
+        grad_out: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let along_xs = apply(grad_out, grad, GradInputOp(self.0, xs.shape().clone()))?;
+        let along_grad_out = apply(xs, grad, ConvOp(self.0))?;
+        Ok((Some(along_xs), Some(along_grad_out)))
+    }
+}
