@@ -41,7 +41,8 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![warn(missing_docs)]
-#![forbid(unsafe_code)]
+// `unsafe` only to call the AVX2+FMA build of the kernels after detecting both (kernel/tile.rs).
+#![deny(unsafe_code)]
 
 mod camera;
 mod config;

@@ -19,16 +19,12 @@ use rayon::prelude::*;
 
 use crate::config::RenderConfig;
 use crate::error::{invalid, Error, Result};
-use crate::kernel::{
-    backward_ray, forward_ray, setup_ray, GridSpec, OccView, Params, RayOut, Real, VolumeView,
-};
+use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
 use crate::rays::Rays;
-
-/// Columns of the packed output.
-const PACKED: usize = 6;
 /// The most gradient buffers the backward allocates per volume.
 const BLOCKS: usize = 4;
-/// Consecutive rays per tile of the backward's round-robin split.
+/// Consecutive rays per tile: the unit of parallel work, forward and backward (where tiles are
+/// dealt round-robin to the blocks).
 const TILE: usize = 64;
 
 /// The outputs of [`render`]: colour `(R, 3)`, and depth `(R)` and opacity `(R)` when asked for.
@@ -200,6 +196,7 @@ struct CompositeOp<T> {
     grid: GridSpec<T>,
     params: Params<T>,
     cfg: RenderConfig,
+    isa: Isa,
 }
 
 impl<T: Real + WithDType> CompositeOp<T> {
@@ -244,21 +241,28 @@ impl<T: Real + WithDType> CompositeOp<T> {
                 opacity: cfg.outputs.opacity,
             },
             cfg: *cfg,
+            isa: Isa::detect(),
         })
     }
 
-    fn view(&self, b: usize) -> (VolumeView<'_, T>, Option<OccView<'_>>) {
-        let view = VolumeView {
-            data: &self.volumes[b],
-            n: self.grid.n,
-        };
-        let occ = self.occupancy.get(b).map(|o| OccView {
-            occupied: &o.occupied,
-            empty_block: &self.empty_blocks[b],
-            n: o.n,
-            k: o.k,
-        });
-        (view, occ)
+    /// The kernel for volume `b`.
+    fn kernel(&self, b: usize) -> RayKernel<'_, T> {
+        RayKernel {
+            volume: VolumeView {
+                data: &self.volumes[b],
+                n: self.grid.n,
+            },
+            occupancy: self.occupancy.get(b).map(|o| OccView {
+                occupied: &o.occupied,
+                empty_block: &self.empty_blocks[b],
+                n: o.n,
+                k: o.k,
+            }),
+            grid: self.grid,
+            sampler: self.cfg.sampler,
+            params: self.params,
+            isa: self.isa,
+        }
     }
 
     /// Renders every ray of every volume into the packed `(R, 6)` layout.
@@ -269,14 +273,14 @@ impl<T: Real + WithDType> CompositeOp<T> {
         for (b, rays) in self.rays.iter().enumerate() {
             let (mine, tail) = rest.split_at_mut(rays.len() * PACKED);
             rest = tail;
-            let (view, occ) = self.view(b);
-            mine.par_chunks_mut(PACKED)
-                .zip(rays.origins().par_iter().zip(rays.dirs().par_iter()))
-                .for_each(|(o, (&origin, &dir))| {
-                    let g = setup_ray(origin, dir, &self.grid, self.cfg.sampler);
-                    let r = forward_ray(&view, occ.as_ref(), &g, &self.params);
-                    o.copy_from_slice(&[r.rgb[0], r.rgb[1], r.rgb[2], r.depth, r.opacity, r.trans]);
-                });
+            let kernel = self.kernel(b);
+            mine.par_chunks_mut(TILE * PACKED)
+                .zip(
+                    rays.origins()
+                        .par_chunks(TILE)
+                        .zip(rays.dirs().par_chunks(TILE)),
+                )
+                .for_each(|(out, (origins, dirs))| kernel.forward_tile(origins, dirs, out));
         }
         out
     }
@@ -288,7 +292,7 @@ impl<T: Real + WithDType> CompositeOp<T> {
         let mut out = vec![T::zero(); self.rays.len() * self.channels * voxels];
         let mut first_ray = 0;
         for (b, rays) in self.rays.iter().enumerate() {
-            let (view, occ) = self.view(b);
+            let kernel = self.kernel(b);
             let tiles = rays.len().div_ceil(TILE);
             let blocks = tiles.min(BLOCKS);
             let buffers: Vec<Vec<[T; 4]>> = (0..blocks)
@@ -296,32 +300,16 @@ impl<T: Real + WithDType> CompositeOp<T> {
                 .map(|block| {
                     let mut buf = vec![[T::zero(); 4]; voxels];
                     for tile in (block..tiles).step_by(blocks) {
-                        for r in tile * TILE..((tile + 1) * TILE).min(rays.len()) {
-                            let row = (first_ray + r) * PACKED;
-                            let (p, gr) = (&res[row..row + PACKED], &grad[row..row + PACKED]);
-                            let g = setup_ray(
-                                rays.origins()[r],
-                                rays.dirs()[r],
-                                &self.grid,
-                                self.cfg.sampler,
-                            );
-                            let ray_out = RayOut {
-                                rgb: [p[0], p[1], p[2]],
-                                depth: p[3],
-                                opacity: p[4],
-                                trans: p[5],
-                            };
-                            let g_out = [gr[0], gr[1], gr[2], gr[3], gr[4]];
-                            backward_ray(
-                                &view,
-                                occ.as_ref(),
-                                &g,
-                                &self.params,
-                                &ray_out,
-                                g_out,
-                                &mut buf,
-                            );
-                        }
+                        let rays_in_tile = tile * TILE..((tile + 1) * TILE).min(rays.len());
+                        let rows = (first_ray + rays_in_tile.start) * PACKED
+                            ..(first_ray + rays_in_tile.end) * PACKED;
+                        kernel.backward_tile(
+                            &rays.origins()[rays_in_tile.clone()],
+                            &rays.dirs()[rays_in_tile],
+                            &res[rows.clone()],
+                            &grad[rows],
+                            &mut buf,
+                        );
                     }
                     buf
                 })

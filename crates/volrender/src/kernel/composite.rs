@@ -12,7 +12,7 @@
 //! For opacity `dA/dtau_i = T_N`. Finally `dL/dsigma_i = delta_i dL/dtau_i` and
 //! `dL/dc_i = w_i dL/dC`. One pass, in sample order, with no per-sample storage.
 
-use super::march::{march, OccView, RayGeom};
+use super::march::{Marcher, OccView, RayGeom};
 use super::trilinear::{corners, gather, scatter, Corners};
 use super::{Real, VolumeView};
 
@@ -49,37 +49,48 @@ fn attenuation<T: Real>(tau: T) -> (T, T) {
         let alpha = tau * series;
         (alpha, one - alpha)
     } else {
-        let e = (-tau).exp();
+        let e = (-tau).exp_nonpositive();
         (T::one() - e, e)
     }
 }
 
-/// Walks one ray's samples in order, calling `f(t, corners, values)` with each sample's
-/// trilinear corners and interpolated `[sigma, r, g, b]` until `f` returns false. Samples outside
-/// the grid and samples in blocks the occupancy grid marks empty (density exactly 0 there, so
-/// they add nothing to the forward or the backward) are passed over.
-#[inline(always)]
-fn for_each_sample<T: Real>(
-    vol: &VolumeView<'_, T>,
-    occ: Option<&OccView<'_>>,
-    g: &RayGeom<T>,
-    mut f: impl FnMut(T, &Corners<T>, [T; 4]) -> bool,
-) {
-    march(g, occ, |t, u| {
-        let Some(c) = corners(vol.n, u) else {
-            return true;
-        };
-        if occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
-            // Density exactly 0 at this sample: it adds nothing (skipping is on).
-            return true;
+/// One ray's samples with their trilinear corners and interpolated `[sigma, r, g, b]`, in order.
+/// Samples outside the grid and samples in blocks the occupancy grid marks empty (density
+/// exactly 0 there, so they add nothing to the forward or the backward) are passed over.
+struct Samples<'a, T> {
+    vol: &'a VolumeView<'a, T>,
+    occ: Option<&'a OccView<'a>>,
+    marcher: Marcher<'a, T>,
+}
+
+impl<'a, T: Real> Samples<'a, T> {
+    #[inline(always)]
+    fn new(vol: &'a VolumeView<'a, T>, occ: Option<&'a OccView<'a>>, g: &'a RayGeom<T>) -> Self {
+        Self {
+            vol,
+            occ,
+            marcher: Marcher::new(g, occ),
         }
-        let v = gather(vol, &c);
-        f(t, &c, v)
-    });
+    }
+
+    #[inline(always)]
+    fn next_sample(&mut self) -> Option<(T, Corners<T>, [T; 4])> {
+        while let Some((t, u)) = self.marcher.next_sample() {
+            let Some(c) = corners(self.vol.n, u) else {
+                continue;
+            };
+            if self.occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
+                // Density exactly 0 at this sample: it adds nothing (skipping is on).
+                continue;
+            }
+            return Some((t, c, gather(self.vol, &c)));
+        }
+        None
+    }
 }
 
 /// Renders one ray.
-#[inline]
+#[inline(always)]
 pub(crate) fn forward_ray<T: Real>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
@@ -89,7 +100,8 @@ pub(crate) fn forward_ray<T: Real>(
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
-    for_each_sample(vol, occ, g, |t, _, v| {
+    let mut samples = Samples::new(vol, occ, g);
+    while let Some((t, _, v)) = samples.next_sample() {
         let (alpha, keep) = attenuation(v[0] * g.dt);
         let w = trans * alpha;
         for ch in 0..3 {
@@ -102,8 +114,10 @@ pub(crate) fn forward_ray<T: Real>(
             opacity = opacity + w;
         }
         trans = trans * keep;
-        trans > p.epsilon
-    });
+        if trans <= p.epsilon {
+            break;
+        }
+    }
     for ch in 0..3 {
         rgb[ch] = rgb[ch] + trans * p.background[ch];
     }
@@ -118,7 +132,7 @@ pub(crate) fn forward_ray<T: Real>(
 
 /// Adds one ray's gradient with respect to the voxels to `buf`, given the forward's output
 /// `out` and the output gradient `[d_r, d_g, d_b, d_depth, d_opacity]`.
-#[inline]
+#[inline(always)]
 pub(crate) fn backward_ray<T: Real>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
@@ -133,17 +147,20 @@ pub(crate) fn backward_ray<T: Real>(
     let opacity_term = ga * out.trans;
     let mut upto = T::zero();
     let mut trans = T::one();
-    for_each_sample(vol, occ, g, |t, c, v| {
+    let mut samples = Samples::new(vol, occ, g);
+    while let Some((t, c, v)) = samples.next_sample() {
         let (alpha, keep) = attenuation(v[0] * g.dt);
         let w = trans * alpha;
         let next = trans * keep;
         let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * t;
         upto = upto + w * x;
         let d_tau = next * x - (total - upto) + opacity_term;
-        scatter(buf, c, [d_tau * g.dt, w * gr, w * gg, w * gb]);
+        scatter(buf, &c, [d_tau * g.dt, w * gr, w * gg, w * gb]);
         trans = next;
-        trans > p.epsilon
-    });
+        if trans <= p.epsilon {
+            break;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -152,38 +152,57 @@ impl OccView<'_> {
     }
 }
 
-/// Calls `f(t, u)` for each sample of the ray in order, skipping samples in empty cells when
-/// `occ` is given, and stops early when `f` returns false.
-#[inline(always)]
-pub(crate) fn march<T: Real>(
-    g: &RayGeom<T>,
-    occ: Option<&OccView<'_>>,
-    mut f: impl FnMut(T, [T; 3]) -> bool,
-) {
-    let mut i = 0;
-    let mut checked_until = T::neg_infinity();
-    while i < g.n {
-        let t = g.t0 + (T::of(i as f64) + g.off) * g.dt;
-        let u = [
-            g.a[0] + t * g.b[0],
-            g.a[1] + t * g.b[1],
-            g.a[2] + t * g.b[2],
-        ];
-        if let Some(o) = occ {
-            if t >= checked_until {
-                match o.classify(g, u, i) {
-                    Cell::Occupied { until } => checked_until = until,
-                    Cell::Empty { next } => {
-                        i = next;
-                        continue;
+/// The samples of one ray in order, as `(t, u)` (distance and index-space point), passing over
+/// samples in empty cells when an occupancy grid is given.
+///
+/// A cursor with an inlined `next` rather than a closure-taking loop: the per-sample code must
+/// inline into the kernels' AVX2 builds (kernel/tile.rs), and a closure big enough to be worth
+/// optimising is one LLVM declines to inline.
+pub(crate) struct Marcher<'a, T> {
+    g: &'a RayGeom<T>,
+    occ: Option<&'a OccView<'a>>,
+    i: usize,
+    checked_until: T,
+}
+
+impl<'a, T: Real> Marcher<'a, T> {
+    #[inline(always)]
+    pub(crate) fn new(g: &'a RayGeom<T>, occ: Option<&'a OccView<'a>>) -> Self {
+        Self {
+            g,
+            occ,
+            i: 0,
+            checked_until: T::neg_infinity(),
+        }
+    }
+
+    /// Returns the next sample to evaluate, or `None` past the last one.
+    #[inline(always)]
+    pub(crate) fn next_sample(&mut self) -> Option<(T, [T; 3])> {
+        let g = self.g;
+        while self.i < g.n {
+            let i = self.i;
+            let t = g.t0 + (T::of(i as f64) + g.off) * g.dt;
+            let u = [
+                g.a[0] + t * g.b[0],
+                g.a[1] + t * g.b[1],
+                g.a[2] + t * g.b[2],
+            ];
+            if let Some(o) = self.occ {
+                if t >= self.checked_until {
+                    match o.classify(g, u, i) {
+                        Cell::Occupied { until } => self.checked_until = until,
+                        Cell::Empty { next } => {
+                            self.i = next;
+                            continue;
+                        }
                     }
                 }
             }
+            self.i = i + 1;
+            return Some((t, u));
         }
-        if !f(t, u) {
-            return;
-        }
-        i += 1;
+        None
     }
 }
 
@@ -239,15 +258,11 @@ mod tests {
             &CUBE,
             Sampler::Uniform { samples: 40 },
         );
-        let (mut all, mut kept) = (vec![], vec![]);
-        march(&g, None, |t, _| {
-            all.push(t);
-            true
-        });
-        march(&g, Some(&occ), |t, _| {
-            kept.push(t);
-            true
-        });
+        let collect = |occ: Option<&OccView<'_>>| {
+            let mut marcher = Marcher::new(&g, occ);
+            std::iter::from_fn(|| marcher.next_sample().map(|(t, _)| t)).collect::<Vec<f64>>()
+        };
+        let (all, kept) = (collect(None), collect(Some(&occ)));
         let expected: Vec<f64> = all.iter().copied().filter(|&t| t - 3.0 >= 0.0).collect();
         assert_eq!(kept, expected);
     }

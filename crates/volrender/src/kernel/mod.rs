@@ -9,11 +9,14 @@
 #![allow(clippy::needless_range_loop)]
 
 mod composite;
+mod exp;
 mod march;
+mod tile;
 mod trilinear;
 
-pub(crate) use composite::{backward_ray, forward_ray, Params, RayOut};
+pub(crate) use composite::Params;
 pub(crate) use march::{setup_ray, GridSpec, OccView};
+pub(crate) use tile::{Isa, RayKernel, PACKED};
 pub(crate) use trilinear::corners;
 
 use num_traits::Float;
@@ -22,6 +25,14 @@ use num_traits::Float;
 pub(crate) trait Real: Float + Send + Sync + std::fmt::Debug + Default + 'static {
     /// Converts from f64 (rounding for f32).
     fn of(x: f64) -> Self;
+
+    /// `e^x` for `x <= 0`: inline arithmetic within 2 ulp for f32 (see `exp`), the standard
+    /// library's `exp` for f64 (the reference precision).
+    fn exp_nonpositive(self) -> Self;
+
+    /// Truncates a value known to be in `[0, 2^31)` to an index: one conversion instruction
+    /// (through `i32`) instead of the range-checked float-to-`usize` sequence.
+    fn truncate_index(self) -> usize;
 }
 
 impl Real for f32 {
@@ -29,12 +40,32 @@ impl Real for f32 {
     fn of(x: f64) -> Self {
         x as f32
     }
+
+    #[inline(always)]
+    fn exp_nonpositive(self) -> Self {
+        exp::exp_nonpositive(self)
+    }
+
+    #[inline(always)]
+    fn truncate_index(self) -> usize {
+        self as i32 as usize
+    }
 }
 
 impl Real for f64 {
     #[inline]
     fn of(x: f64) -> Self {
         x
+    }
+
+    #[inline(always)]
+    fn exp_nonpositive(self) -> Self {
+        self.exp()
+    }
+
+    #[inline(always)]
+    fn truncate_index(self) -> usize {
+        self as i32 as usize
     }
 }
 

@@ -13,13 +13,18 @@ pub(crate) struct Corners<T> {
     pub(crate) w: [T; 8],
 }
 
-/// Returns the lower and upper neighbour and the upper's weight along an axis of `n` cells.
+/// Returns the lower and upper neighbour and the upper's weight along an axis of `n` cells, for
+/// a coordinate `u` already known to be in `[-0.5, n - 0.5]` (so not NaN).
 #[inline(always)]
 fn axis<T: Real>(u: T, n: usize) -> (usize, usize, T) {
     let last = n - 1;
-    let uc = u.max(T::zero()).min(T::of(last as f64));
-    // uc >= 0, so truncation is floor (and avoids a libm call without SSE4.1).
-    let i0 = uc.to_usize().unwrap_or(0).min(last);
+    let top = T::of(last as f64);
+    // Plain comparisons, not `max`/`min`: u is not NaN, and they compile to single min/max
+    // instructions instead of NaN-aware sequences.
+    let uc = if u > T::zero() { u } else { T::zero() };
+    let uc = if uc < top { uc } else { top };
+    // 0 <= uc <= last, so truncation is floor.
+    let i0 = uc.truncate_index();
     let i1 = usize::min(i0 + 1, last);
     (i0, i1, uc - T::of(i0 as f64))
 }
