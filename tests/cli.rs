@@ -1,16 +1,11 @@
 //! The `volgen` binary end to end: info, export and render on a small volume, and clear errors.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use radiance_volume::{Aabb, GridDims, RadianceVolume};
 
-fn volgen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volgen"))
-        .args(args)
-        .output()
-        .expect("volgen runs")
-}
+mod common;
+use common::volgen;
 
 fn small_volume(dir: &Path) -> String {
     let v = RadianceVolume::from_fn(GridDims::new(12, 16, 20), Aabb::CUBE, 4, |p, o| {

@@ -3,30 +3,11 @@
 //! input is a clear error.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use radiance_volume::RadianceVolume;
 
-fn volgen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volgen"))
-        .args(args)
-        .output()
-        .expect("volgen runs")
-}
-
-fn ok(out: &Output) -> String {
-    assert!(
-        out.status.success(),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn path(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+mod common;
+use common::{failure, ok, path, volgen};
 
 #[test]
 fn demo_writes_dataset_model_samples_pictures_and_summary() {
@@ -210,4 +191,309 @@ fn scene_writes_a_loadable_dataset_and_rejects_unknown_names() {
         err.contains("volcano") && err.contains("mushrooms") && err.contains("islands"),
         "{err}"
     );
+}
+
+/// A `micro` model trained once for the application tests (under cargo's per-target scratch
+/// directory, replaced on every run of this test binary).
+fn trained_micro() -> &'static Path {
+    static RUN: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    RUN.get_or_init(|| {
+        let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_singrav_micro");
+        let _ = std::fs::remove_dir_all(&root);
+        let (data, run) = (root.join("data"), root.join("run"));
+        ok(&volgen(&[
+            "scene",
+            "stones",
+            "--out",
+            path(&data),
+            "--views",
+            "6",
+            "--resolution",
+            "36",
+            "--grid",
+            "32",
+        ]));
+        ok(&volgen(&[
+            "train",
+            path(&data),
+            "--out",
+            path(&run),
+            "--preset",
+            "micro",
+        ]));
+        run
+    })
+}
+
+/// Every value of a volume file, channel-major.
+fn volume_values(file: &Path) -> Vec<f32> {
+    let volume = RadianceVolume::load_safetensors(file).unwrap();
+    volume.tensor().flatten_all().unwrap().to_vec1().unwrap()
+}
+
+fn mean_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f32>() / a.len() as f32
+}
+
+#[test]
+fn animate_writes_frames_that_move_a_little_and_repeat_with_the_seed() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let animate = |dir: &Path| {
+        ok(&volgen(&[
+            "animate",
+            path(model),
+            "--frames",
+            "3",
+            "--seed",
+            "7",
+            "--out",
+            path(dir),
+        ]))
+    };
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    let text = animate(&a);
+    assert!(text.contains("frame 2: generated in"), "{text}");
+    for t in 0..3 {
+        for ext in ["safetensors", "png"] {
+            assert!(
+                a.join(format!("frame_{t:04}.{ext}")).is_file(),
+                "frame {t} {ext}"
+            );
+        }
+    }
+    assert!(!a.join("frame_0003.safetensors").exists());
+
+    // Consecutive frames differ, but far less than two independent scenes do.
+    let frames: Vec<Vec<f32>> = (0..3)
+        .map(|t| volume_values(&a.join(format!("frame_{t:04}.safetensors"))))
+        .collect();
+    let samples = tmp.path().join("samples");
+    ok(&volgen(&[
+        "sample",
+        path(model),
+        "--count",
+        "2",
+        "--seed",
+        "7",
+        "--out",
+        path(&samples),
+    ]));
+    let scene = |i: usize| volume_values(&samples.join(format!("scene_{i}.safetensors")));
+    let independent = mean_abs_diff(&scene(0), &scene(1));
+    for t in 0..2 {
+        let step = mean_abs_diff(&frames[t], &frames[t + 1]);
+        assert!(
+            step > 0.0 && step < 0.5 * independent,
+            "{step} vs {independent}"
+        );
+    }
+    // The first frame is the scene `sample` makes with the same seed.
+    assert_eq!(frames[0], scene(0));
+
+    // The same seed writes the same volumes and pictures. (The bytes of a safetensors file
+    // can differ: its header's metadata order follows a HashMap.)
+    animate(&b);
+    for t in 0..3 {
+        let volume = format!("frame_{t:04}.safetensors");
+        assert_eq!(
+            volume_values(&a.join(&volume)),
+            volume_values(&b.join(&volume))
+        );
+        let picture = format!("frame_{t:04}.png");
+        assert_eq!(
+            std::fs::read(a.join(&picture)).unwrap(),
+            std::fs::read(b.join(&picture)).unwrap(),
+            "{picture}"
+        );
+    }
+}
+
+#[test]
+fn edit_removal_empties_the_box_and_keeps_the_rest() {
+    let model = trained_micro();
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path();
+    let text = ok(&volgen(&[
+        "edit",
+        path(model),
+        "--seed",
+        "3",
+        "--out",
+        path(dir),
+        "--remove",
+        "-0.5,-0.5,-1,0.5,0.5,0.2",
+    ]));
+    assert!(text.contains("remove -0.5,-0.5,-1,0.5,0.5,0.2"), "{text}");
+    for stem in ["original", "edited", "harmonized"] {
+        assert!(dir.join(format!("{stem}.png")).is_file(), "{stem}.png");
+    }
+    let original = RadianceVolume::load_safetensors(dir.join("original.safetensors")).unwrap();
+    let edited = RadianceVolume::load_safetensors(dir.join("edited.safetensors")).unwrap();
+    let grid = *original.grid();
+    let (before, after) = (
+        volume_values(&dir.join("original.safetensors")),
+        volume_values(&dir.join("edited.safetensors")),
+    );
+    let (lo, hi) = (
+        glam::Vec3::new(-0.5, -0.5, -1.0),
+        glam::Vec3::new(0.5, 0.5, 0.2),
+    );
+    let (mut inside, mut far) = (0, 0);
+    let dims = grid.dims;
+    for z in 0..dims.d {
+        for y in 0..dims.h {
+            for x in 0..dims.w {
+                let p = grid.cell_center(z, y, x);
+                // Distance outside the box (0 inside), per axis, then the largest.
+                let gap = (lo - p).max(p - hi).max(glam::Vec3::ZERO).max_element();
+                let i = dims.index(z, y, x);
+                if p.cmpge(lo).all() && p.cmple(hi).all() {
+                    inside += 1;
+                    assert!(after[i] < 1e-3, "density {} left at {p}", after[i]);
+                } else if gap > 0.3 {
+                    far += 1;
+                    let voxels = dims.voxel_count();
+                    for c in 0..4 {
+                        let j = c * voxels + i;
+                        assert_eq!(before[j], after[j], "channel {c} changed at {p}");
+                    }
+                }
+            }
+        }
+    }
+    assert!(inside > 0 && far > 0, "{inside} cells inside, {far} far");
+    let max_inside_before = before[..dims.voxel_count()]
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| {
+            let p = grid.cell_center(i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
+            p.cmpge(lo).all() && p.cmple(hi).all()
+        })
+        .map(|(_, v)| *v)
+        .fold(0f32, f32::max);
+    assert!(max_inside_before > 1e-2, "nothing was there to remove");
+    assert_eq!(edited.dims(), original.dims());
+
+    // Duplicate and move together, without harmonisation.
+    let both = tempfile::tempdir().unwrap();
+    let text = ok(&volgen(&[
+        "edit",
+        path(model),
+        "--out",
+        path(both.path()),
+        "--duplicate",
+        "-0.8,-0.8,-0.8,-0.2,-0.2,-0.2",
+        "--to",
+        "1,1,1",
+        "--move",
+        "0.2,-0.8,-0.8,0.8,-0.2,-0.2",
+        "--by",
+        "-1,0,0",
+        "--no-harmonize",
+    ]));
+    assert!(
+        text.contains("duplicate") && text.contains("move"),
+        "{text}"
+    );
+    assert!(both.path().join("edited.safetensors").is_file());
+    assert!(!both.path().join("harmonized.safetensors").exists());
+}
+
+#[test]
+fn animate_and_edit_name_the_bad_flag() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = path(tmp.path());
+    let edit = |extra: &[&str]| {
+        let mut args = vec!["edit", path(model), "--out", out];
+        args.extend_from_slice(extra);
+        failure(&volgen(&args))
+    };
+    let cases: [(&[&str], &[&str]); 8] = [
+        (
+            &["--remove", "1,2,3"],
+            &[
+                "--remove",
+                "expected six comma-separated numbers x0,y0,z0,x1,y1,z1",
+                "1,2,3",
+            ],
+        ),
+        (
+            &["--remove", "0,0,0,1,x,1"],
+            &["--remove", "six comma-separated"],
+        ),
+        (&["--remove", "0.5,0,0,0,1,1"], &["--remove", "empty"]),
+        (
+            &["--remove", "0,0,0,2,1,1"],
+            &["remove 0,0,0,2,1,1", "inside the volume box [-1, 1]^3"],
+        ),
+        (
+            &["--move", "0,0,0,0.5,0.5,0.5", "--by", "1,2"],
+            &["--by", "three comma-separated numbers dx,dy,dz"],
+        ),
+        (
+            &["--duplicate", "0,0,0,0.5,0.5,0.5", "--to", "0.8,0,0"],
+            &["duplicate", "destination", "inside the volume box"],
+        ),
+        (
+            &["--harmonize-from", "7", "--remove", "0,0,0,0.5,0.5,0.5"],
+            &["--harmonize-from", "7"],
+        ),
+        (&[], &["nothing to edit"]),
+    ];
+    for (args, expected) in cases {
+        let err = edit(args);
+        for needle in expected {
+            assert!(err.contains(needle), "{args:?}: {err}");
+        }
+    }
+    let missing_to = edit(&["--duplicate", "0,0,0,0.5,0.5,0.5"]);
+    assert!(missing_to.contains("--to"), "{missing_to}");
+
+    let animate = |extra: &[&str]| {
+        let mut args = vec!["animate", path(model), "--out", out];
+        args.extend_from_slice(extra);
+        failure(&volgen(&args))
+    };
+    let err = animate(&["--anchor", "1.5"]);
+    assert!(
+        err.contains("anchor") && err.contains("between 0 and 1"),
+        "{err}"
+    );
+    let err = animate(&["--first-moving-scale", "9"]);
+    assert!(
+        err.contains("first_moving_scale") && err.contains('9'),
+        "{err}"
+    );
+    let err = animate(&["--frames", "0"]);
+    assert!(err.contains("--frames"), "{err}");
+}
+
+#[test]
+fn train_refuses_missing_vgg19_weights_and_vgg19_without_swd() {
+    let data = trained_micro().parent().unwrap().join("data");
+    let tmp = tempfile::tempdir().unwrap();
+    let weights = tmp.path().join("no-such-vgg19.safetensors");
+    let run = tmp.path().join("run");
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            path(&data),
+            "--out",
+            path(&run),
+            "--preset",
+            "micro",
+            "--vgg19",
+            path(&weights),
+        ];
+        args.extend_from_slice(extra);
+        failure(&volgen(&args))
+    };
+    let err = train(&[]);
+    assert!(err.contains("no-such-vgg19.safetensors"), "{err}");
+    assert!(!run.exists(), "the run started: {err}");
+    let err = train(&["--no-swd"]);
+    assert!(err.contains("--no-swd") && err.contains("--vgg19"), "{err}");
 }

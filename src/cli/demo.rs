@@ -13,9 +13,11 @@ use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::dataset::{write_dataset, DatasetSpec};
 use singrav::sample::Sample;
 use singrav::scenes::SceneKind;
+use singrav::train::RunOptions;
 use singrav::SinGrav;
 
-use super::sample::{sample_to_dir, Outputs};
+use super::model_io::Outputs;
+use super::sample::sample_to_dir;
 use super::train::{load_dataset, train_with_progress, TrainOptions};
 
 /// Arguments of `volgen demo`.
@@ -99,7 +101,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         if resume { ", resuming" } else { "" },
         run_dir.display()
     );
-    let model = train_with_progress(&config, &dataset, &run_dir, resume)?;
+    let options = RunOptions {
+        resume,
+        ..args.train.run_options()
+    };
+    let model = train_with_progress(&config, &dataset, &run_dir, &options)?;
     let state = Checkpoint::load(&run_dir.join(CHECKPOINT_FILE), model.device())?.state;
 
     println!(

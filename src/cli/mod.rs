@@ -4,9 +4,13 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod animate;
 mod demo;
+mod edit;
+mod eval;
 mod export;
 mod info;
+mod model_io;
 mod render;
 mod sample;
 mod scene;
@@ -34,8 +38,14 @@ enum Command {
     Train(train::TrainArgs),
     /// Generate new scenes from a trained model: volumes, VDB/EXR on request, PNG views.
     Sample(sample::SampleArgs),
+    /// Animate a generated scene (a smoothed random walk on the finer scales' noise), frame by frame.
+    Animate(animate::AnimateArgs),
+    /// Edit a generated scene (remove, duplicate, move boxes) and harmonise it with the generators.
+    Edit(edit::EditArgs),
     /// The whole pipeline: dataset of a built-in scene, tiny training, samples, pictures, VDB.
     Demo(demo::DemoArgs),
+    /// The paper's metrics of a trained model: Diversity-MV, and SIFID-MV with InceptionV3 weights.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the command line, runs the subcommand and turns errors into a message and exit code 1.
@@ -51,7 +61,10 @@ pub fn run() -> ExitCode {
         Command::Scene(args) => scene::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),
+        Command::Animate(args) => animate::run(&args),
+        Command::Edit(args) => edit::run(&args),
         Command::Demo(args) => demo::run(&args),
+        Command::Eval(args) => eval::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

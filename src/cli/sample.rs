@@ -3,12 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use rand::SeedableRng;
 use singrav::sample::{showcase_cameras, Sample};
 use singrav::SinGrav;
 
-use super::export::{write_exr_slices, write_vdb, Encoding};
+use super::model_io::{load_model, write_scene, Outputs};
 
 /// Arguments of `volgen sample`.
 #[derive(Debug, clap::Args)]
@@ -24,42 +24,25 @@ pub struct SampleArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Also write each scene as OpenVDB (density and color grids).
-    #[arg(long)]
-    vdb: bool,
-    /// Also write each scene as a stack of EXR slices.
-    #[arg(long)]
-    exr_slices: bool,
+    #[command(flatten)]
+    outputs: Outputs,
     /// Views rendered per scene.
     #[arg(long, default_value_t = 3)]
     views: usize,
 }
 
-/// What to write for each scene.
-#[derive(Debug, Clone, Copy)]
-pub struct Outputs {
-    /// Write `scene_i.vdb`.
-    pub vdb: bool,
-    /// Write `scene_i_exr/`.
-    pub exr_slices: bool,
-}
-
 /// Generates and writes the scenes.
 pub fn run(args: &SampleArgs) -> Result<()> {
-    let (model, state) = SinGrav::load(&args.model, &super::train::device()?)?;
-    if !state.finished(model.config()) {
-        eprintln!(
-            "note: {} is not fully trained (stopped at scale {}); sampling from its trained scales",
-            args.model.display(),
-            state.scale
-        );
-    }
+    let model = load_model(&args.model)?;
     let cameras = showcase_cameras(args.views, model.render_size())?;
-    let outputs = Outputs {
-        vdb: args.vdb,
-        exr_slices: args.exr_slices,
-    };
-    sample_to_dir(&model, &cameras, args.count, args.seed, &args.out, outputs)?;
+    sample_to_dir(
+        &model,
+        &cameras,
+        args.count,
+        args.seed,
+        &args.out,
+        args.outputs,
+    )?;
     Ok(())
 }
 
@@ -73,38 +56,21 @@ pub fn sample_to_dir(
     dir: &Path,
     outputs: Outputs,
 ) -> Result<Vec<Sample>> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut samples = Vec::with_capacity(count);
     for i in 0..count {
         let sample = model.sample(&mut rng, cameras)?;
-        let stem = format!("scene_{i}");
-        sample
-            .volume
-            .save_safetensors(dir.join(format!("{stem}.safetensors")))?;
-        let views = (0..cameras.len())
-            .map(|v| sample.views.get(v))
-            .collect::<candle_core::Result<Vec<_>>>()?;
-        singrav::picture::write_grid(&dir.join(format!("{stem}.png")), &[views])?;
-        if outputs.vdb {
-            write_vdb(
-                &sample.volume,
-                &dir.join(format!("{stem}.vdb")),
-                &Encoding::default(),
-            )?;
-        }
-        if outputs.exr_slices {
-            write_exr_slices(
-                &sample.volume,
-                &dir.join(format!("{stem}_exr")),
-                &stem,
-                &Encoding::default(),
-            )?;
-        }
+        let files = write_scene(
+            dir,
+            &format!("scene_{i}"),
+            &sample.volume,
+            &sample.views,
+            outputs,
+        )?;
         println!(
             "scene {i}: generated in {:.3} s -> {}",
             sample.generation_seconds,
-            dir.join(format!("{stem}.*")).display()
+            files.display()
         );
         samples.push(sample);
     }

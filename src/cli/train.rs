@@ -1,13 +1,14 @@
-//! `volgen train DATASET --out RUN [--preset tiny] [--resume]`: train SinGRAV on a
-//! `transforms.json` RGB-D dataset, with a progress bar, a JSON-lines log and checkpoints.
+//! `volgen train DATASET --out RUN [--preset tiny] [--resume] [--vgg19 WEIGHTS]`: train
+//! SinGRAV on a `transforms.json` RGB-D dataset, with a progress bar, a JSON-lines log and
+//! checkpoints.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use singrav::dataset::Dataset;
-use singrav::train::{train, Control, Event, Progress, StepLosses, TrainOutcome};
-use singrav::{SinGrav, TrainConfig};
+use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
+use singrav::{SinGrav, SwdFeatures, TrainConfig};
 
 /// Arguments of `volgen train`.
 #[derive(Debug, clap::Args)]
@@ -36,6 +37,11 @@ pub struct TrainOptions {
     /// Ablation: train without the SWD loss at the last scale.
     #[arg(long)]
     pub no_swd: bool,
+    /// The last scale's SWD loss compares VGG-19 features (as the paper) with these weights:
+    /// safetensors with torchvision's names (docs/swd-loss.md shows the conversion). Without
+    /// it, a weights-free patch pyramid. Give it again with --resume.
+    #[arg(long, value_name = "FILE", conflicts_with = "no_swd")]
+    pub vgg19: Option<PathBuf>,
     /// Ablation: train without the CSG grid at the coarsest scale.
     #[arg(long)]
     pub no_csg: bool,
@@ -62,11 +68,22 @@ impl TrainOptions {
             config = config.with_iterations(iterations);
         }
         config.use_swd &= !self.no_swd;
+        if self.vgg19.is_some() {
+            config.swd_features = SwdFeatures::Vgg19;
+        }
         config.use_csg &= !self.no_csg;
         config.use_depth &= !self.no_depth;
         config.seed = self.seed;
         config.validate()?;
         Ok(config)
+    }
+
+    /// How the run goes beside its configuration: resume or not, the VGG-19 weights.
+    pub fn run_options(&self) -> RunOptions {
+        RunOptions {
+            resume: self.resume,
+            vgg19_weights: self.vgg19.clone(),
+        }
     }
 }
 
@@ -74,7 +91,7 @@ impl TrainOptions {
 pub fn run(args: &TrainArgs) -> Result<()> {
     let config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config)?;
-    train_with_progress(&config, &dataset, &args.out, args.options.resume)?;
+    train_with_progress(&config, &dataset, &args.out, &args.options.run_options())?;
     println!("trained model: {}", args.out.display());
     Ok(())
 }
@@ -90,7 +107,7 @@ pub fn train_with_progress(
     config: &TrainConfig,
     dataset: &Dataset,
     run_dir: &Path,
-    resume: bool,
+    options: &RunOptions,
 ) -> Result<Box<SinGrav>> {
     let total = config.total_iterations() as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
@@ -131,7 +148,7 @@ pub fn train_with_progress(
         }
         Control::Continue
     };
-    let outcome = train(config, dataset, run_dir, resume, &device()?, &mut observer)
+    let outcome = train(config, dataset, run_dir, options, &device()?, &mut observer)
         .with_context(|| format!("training into {}", run_dir.display()))?;
     bar.finish_and_clear();
     match outcome {

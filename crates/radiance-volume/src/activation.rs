@@ -2,6 +2,8 @@
 
 use candle_core::{Result, Tensor};
 
+use crate::error::invalid;
+
 /// Maps raw (pre-activation) volumes to physical ones: density
 /// `sigma = density_scale * softplus(raw_sigma + density_shift)` (>= 0, in 1/world-length), colour
 /// `rgb = sigmoid(raw_rgb)` (in [0, 1]); extra feature channels pass through unchanged.
@@ -56,6 +58,47 @@ impl Activation {
             density_scale,
             ..self
         }
+    }
+
+    /// Returns the raw density that maps to the physical density `sigma`, the inverse of the
+    /// density half of [`Activation::apply`]: `softplus^-1(sigma / density_scale) -
+    /// density_shift`, with `softplus^-1(y) = ln(e^y - 1)` computed in f64 so that tiny
+    /// densities (for example "empty" space for an edit) keep their precision.
+    ///
+    /// Errors unless `sigma` is finite and positive (softplus never reaches 0, so no raw value
+    /// gives exactly empty space) and the result is finite in f32.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use radiance_volume::Activation;
+    /// let act = Activation::default().with_density_scale(25.0).with_density_shift(-4.0);
+    /// let raw = act.raw_density(1e-4)?;
+    /// let voxel = Tensor::new(&[raw, 0.0, 0.0, 0.0], &Device::Cpu)?.reshape((4, 1, 1, 1))?;
+    /// let sigma: Vec<f32> = act.apply(&voxel)?.flatten_all()?.to_vec1()?;
+    /// // `apply` runs in f32, where ln(1 + 4e-6) keeps about two digits.
+    /// assert!((sigma[0] / 1e-4 - 1.0).abs() < 0.02, "{}", sigma[0]);
+    /// assert!(act.raw_density(0.0).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn raw_density(&self, sigma: f32) -> crate::Result<f32> {
+        if !(sigma.is_finite() && sigma > 0.0) {
+            return Err(invalid(
+                "sigma",
+                format!("expected a finite density > 0 to invert the activation, got {sigma}"),
+            ));
+        }
+        let y = f64::from(sigma) / f64::from(self.density_scale);
+        let raw = (y.exp_m1().ln() - f64::from(self.density_shift)) as f32;
+        if !raw.is_finite() {
+            return Err(invalid(
+                "sigma",
+                format!(
+                    "density {sigma} has no finite raw value under density scale {} and shift {}",
+                    self.density_scale, self.density_shift
+                ),
+            ));
+        }
+        Ok(raw)
     }
 
     /// Applies the activation to a raw `(C, D, H, W)` or `(N, C, D, H, W)` tensor with C >= 4.

@@ -71,6 +71,10 @@ pub struct TrainConfig {
     pub background: [f32; 3],
     /// Ablation switch: the SWD loss at the last scale.
     pub use_swd: bool,
+    /// The features the SWD loss compares. Recorded so that a resumed run cannot switch them;
+    /// absent from checkpoints made before it existed, which used the patch pyramid.
+    #[serde(default)]
+    pub swd_features: SwdFeatures,
     /// Ablation switch: the CSG grid injected at the coarsest scale.
     pub use_csg: bool,
     /// Ablation switch: depth supervision (depth channel for the critics and the depth term).
@@ -81,6 +85,21 @@ pub struct TrainConfig {
     pub checkpoint_iterations: usize,
     /// Seed of every random draw: weights, noises, views, penalties, projections.
     pub seed: u64,
+}
+
+/// The features of the last scale's sliced Wasserstein texture loss.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SwdFeatures {
+    /// swd-loss's weights-free Laplacian pyramid of 7x7 patches (up to 3 levels).
+    #[default]
+    PatchPyramid,
+    /// VGG-19 activations `relu1_1` .. `relu4_4` in Heitz et al.'s setting (average pooling,
+    /// reflect padding, one slice per channel), as the paper; the weights (torchvision's names,
+    /// see docs/swd-loss.md) are given to [`crate::train::train`] in
+    /// [`crate::train::RunOptions::vgg19_weights`], not recorded here, so a run can resume
+    /// with its weights file moved.
+    Vgg19,
 }
 
 /// How long one scale trains. One iteration is `d_steps` critic steps, then `g_steps`
@@ -176,6 +195,7 @@ impl TrainConfig {
             density_shift: -4.0,
             background: [1.0, 1.0, 1.0],
             use_swd: true,
+            swd_features: SwdFeatures::PatchPyramid,
             use_csg: true,
             use_depth: true,
             checkpoint_seconds: 300,
@@ -346,6 +366,12 @@ impl TrainConfig {
                     ),
                 ));
             }
+        }
+        if !self.use_swd && self.swd_features != SwdFeatures::PatchPyramid {
+            return Err(invalid(
+                "swd_features",
+                "VGG-19 features need the SWD loss (use_swd); without it they would go unused",
+            ));
         }
         let weights = [
             self.learning_rate,

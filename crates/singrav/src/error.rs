@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-/// Errors of dataset loading, training, checkpoints and sampling.
+/// Errors of dataset loading, training, checkpoints, sampling and metrics.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A file could not be read or written.
@@ -30,6 +30,15 @@ pub enum Error {
         /// The checkpoint file or directory.
         path: PathBuf,
         /// What is wrong.
+        why: String,
+    },
+    /// A pretrained network's weights file is not a safetensors file, or a tensor in it is
+    /// missing, misshapen or out of range.
+    #[error("weights {path}: {why}")]
+    Weights {
+        /// The weights file.
+        path: PathBuf,
+        /// Which tensor is wrong and what was expected.
         why: String,
     },
     /// A setting or argument is out of range.

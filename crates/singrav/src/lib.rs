@@ -6,13 +6,13 @@
 //! - [`TrainConfig`]: presets (`paper`, `small`, `tiny`, `micro`) and ablation switches.
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
 //! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
-//! - [`sample`]: new scenes from a trained model; [`applications`]: edit harmonisation and
-//!   animation; [`metrics`]: Diversity-MV.
+//! - [`sample`]: new scenes from a trained model; [`applications`]: editing, harmonisation and
+//!   animation; [`metrics`]: Diversity-MV and SIFID-MV.
 //!
 //! ```no_run
 //! use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
 //! use singrav::scenes::StandingStones;
-//! use singrav::train::{train, Control, TrainOutcome};
+//! use singrav::train::{train, Control, RunOptions, TrainOutcome};
 //! use singrav::TrainConfig;
 //! // The gradient penalty differentiates a gradient: set before any backward pass.
 //! std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
@@ -21,7 +21,7 @@
 //! let config = TrainConfig::preset("tiny")?;
 //! let data = Dataset::load(dir, config.background)?;
 //! let device = candle_core::Device::Cpu;
-//! let outcome = train(&config, &data, "runs/stones".as_ref(), false, &device, &mut |_| Control::Continue)?;
+//! let outcome = train(&config, &data, "runs/stones".as_ref(), &RunOptions::default(), &device, &mut |_| Control::Continue)?;
 //! if let TrainOutcome::Finished(model) = outcome {
 //!     let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
 //!     let scene = model.sample(&mut rand::rng(), &cameras)?;
@@ -46,6 +46,6 @@ pub mod sample;
 pub mod scenes;
 pub mod train;
 
-pub use config::{ScaleSchedule, TrainConfig};
+pub use config::{ScaleSchedule, SwdFeatures, TrainConfig};
 pub use error::{Error, Result};
 pub use model::SinGrav;

@@ -84,26 +84,46 @@ impl SinGrav {
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
         let started = Instant::now();
-        let noise = self.draw_noise(self.volume_scales(), rng)?;
-        let raw = self.generate(&noise)?.detach();
-        let volume =
-            RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &self.config().activation())?;
+        let raw = self.generate_random(rng)?;
+        let volume = self.to_physical(&raw)?;
         let generation_seconds = started.elapsed().as_secs_f64();
+        Ok(Sample {
+            volume,
+            views: self.render_raw(&raw, cameras)?,
+            generation_seconds,
+        })
+    }
+
+    /// A random raw volume `(1, 4, s, s, s)` of the finest 3D scale built, from noise drawn
+    /// from `rng` (detached; what [`SinGrav::sample`] activates and renders).
+    pub fn generate_random(&self, rng: &mut impl rand::Rng) -> Result<Tensor> {
+        let noise = self.draw_noise(self.volume_scales(), rng)?;
+        Ok(self.generate(&noise)?.detach())
+    }
+
+    /// The physical volume over `[-1, 1]^3` of a raw volume `(1, 4, s, s, s)`, through the
+    /// configuration's activation.
+    pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
+        Ok(RadianceVolume::from_raw(
+            &raw.squeeze(0)?,
+            Aabb::CUBE,
+            &self.config().activation(),
+        )?)
+    }
+
+    /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized
+    /// [`SinGrav::render_size`]), doubled by the upsampler G_N when it is trained.
+    pub fn render_raw(&self, raw: &Tensor, cameras: &[Camera]) -> Result<Tensor> {
         let last = self.volume_scales();
         let renderer =
             ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false);
         let refs: Vec<&Camera> = cameras.iter().collect();
-        let (coarse, _) = renderer.render(&raw, &refs)?;
-        let views = if self.has_upsampler() {
-            self.upsample_images(&coarse)?.clamp(0f32, 1f32)?
+        let (coarse, _) = renderer.render(raw, &refs)?;
+        if self.has_upsampler() {
+            Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?)
         } else {
-            coarse
-        };
-        Ok(Sample {
-            volume,
-            views,
-            generation_seconds,
-        })
+            Ok(coarse)
+        }
     }
 
     /// The rendering size the 3D pyramid produces (cameras for [`SinGrav::sample`] use it).

@@ -5,12 +5,12 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
 use singrav::scenes::StandingStones;
-use singrav::train::{train, Control, Event, Progress, StepLosses, TrainOutcome};
-use singrav::{Error, ScaleSchedule, SinGrav, TrainConfig};
+use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
+use singrav::{Error, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
 
 /// A small dataset of the stones scene at the micro preset's final resolution.
 fn dataset(dir: &Path) -> Dataset {
@@ -24,6 +24,13 @@ fn dataset(dir: &Path) -> Dataset {
     Dataset::load(dir, [1.0; 3]).unwrap()
 }
 
+fn resume() -> RunOptions {
+    RunOptions {
+        resume: true,
+        ..RunOptions::default()
+    }
+}
+
 fn micro() -> TrainConfig {
     std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
     TrainConfig::preset("micro").unwrap()
@@ -35,6 +42,16 @@ fn run_to_end(
     data: &Dataset,
     dir: &Path,
 ) -> (SinGrav, Vec<(usize, StepLosses)>) {
+    run_with(config, data, dir, &RunOptions::default())
+}
+
+/// [`run_to_end`] with run options.
+fn run_with(
+    config: &TrainConfig,
+    data: &Dataset,
+    dir: &Path,
+    options: &RunOptions,
+) -> (SinGrav, Vec<(usize, StepLosses)>) {
     let mut steps = Vec::new();
     let mut observer = |p: &Progress| {
         if p.event == Event::Step {
@@ -42,7 +59,7 @@ fn run_to_end(
         }
         Control::Continue
     };
-    match train(config, data, dir, false, &Device::Cpu, &mut observer).unwrap() {
+    match train(config, data, dir, options, &Device::Cpu, &mut observer).unwrap() {
         TrainOutcome::Finished(model) => (*model, steps),
         TrainOutcome::Stopped => panic!("nobody asked to stop"),
     }
@@ -214,7 +231,15 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
             Control::Continue
         }
     };
-    let outcome = train(&config, &data, &killed, false, &Device::Cpu, &mut stop).unwrap();
+    let outcome = train(
+        &config,
+        &data,
+        &killed,
+        &RunOptions::default(),
+        &Device::Cpu,
+        &mut stop,
+    )
+    .unwrap();
     assert!(matches!(outcome, TrainOutcome::Stopped));
     let state = Checkpoint::load(&killed.join(CHECKPOINT_FILE), &Device::Cpu)
         .unwrap()
@@ -222,14 +247,24 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     assert_eq!((state.scale, state.iteration), (2, 2));
 
     // Without --resume the run directory is refused rather than overwritten.
-    let err = train(&config, &data, &killed, false, &Device::Cpu, &mut |_| {
-        Control::Continue
-    });
+    let err = train(
+        &config,
+        &data,
+        &killed,
+        &RunOptions::default(),
+        &Device::Cpu,
+        &mut |_| Control::Continue,
+    );
     assert!(matches!(err, Err(Error::Checkpoint { .. })));
 
-    let resumed = train(&config, &data, &killed, true, &Device::Cpu, &mut |_| {
-        Control::Continue
-    })
+    let resumed = train(
+        &config,
+        &data,
+        &killed,
+        &resume(),
+        &Device::Cpu,
+        &mut |_| Control::Continue,
+    )
     .unwrap();
     assert!(matches!(resumed, TrainOutcome::Finished(_)));
     assert_same_tensors(
@@ -252,7 +287,7 @@ fn resume_refuses_another_configuration_and_names_the_field() {
         lambda_depth: 1.0,
         ..config
     };
-    let err = train(&other, &data, &run, true, &Device::Cpu, &mut |_| {
+    let err = train(&other, &data, &run, &resume(), &Device::Cpu, &mut |_| {
         Control::Continue
     })
     .err()
@@ -267,7 +302,7 @@ fn resume_refuses_another_configuration_and_names_the_field() {
         &other,
         &data,
         &tmp.path().join("empty"),
-        true,
+        &resume(),
         &Device::Cpu,
         &mut |_| Control::Continue,
     )
@@ -357,25 +392,56 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
         step > 0.0 && step < dist(&frames[0], &independent),
         "{step}"
     );
-    // With every scale's noise fixed, the animation stands still.
+    // Fully anchored to the first frame's noise, the animation stands still.
     let frozen = singrav::applications::WalkConfig {
-        first_moving_scale: 4,
+        anchor: 1.0,
         ..walk
     };
     let still = model.animate(3, frozen, &mut rng).unwrap();
     assert_eq!(dist(&still[0], &still[2]), 0.0);
+    // Frame by frame, the animation is what `animate` returns at once.
+    let mut one_by_one = model
+        .animation(walk, rand_chacha::ChaCha8Rng::seed_from_u64(4))
+        .unwrap();
+    for frame in &frames {
+        assert_eq!(dist(frame, &one_by_one.next_frame().unwrap()), 0.0);
+    }
+    for bad in [
+        singrav::applications::WalkConfig {
+            first_moving_scale: 4,
+            ..walk
+        },
+        singrav::applications::WalkConfig {
+            momentum: -0.1,
+            ..walk
+        },
+    ] {
+        assert!(model.animate(2, bad, &mut rng).is_err());
+    }
 
+    // Harmonising from scale 2 re-runs G_2 and G_3, from scale 3 only G_3 (on the edit itself).
     let edited = frames[0].clone();
-    let out = model
-        .harmonize(&edited, 1, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1))
-        .unwrap();
-    assert_eq!(out.dims(), edited.dims());
-    let again = model
-        .harmonize(&edited, 1, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1))
-        .unwrap();
-    assert_eq!(dist(&out, &again), 0.0);
-    assert!(model.harmonize(&edited, 3, &mut rng).is_err());
-    assert!(model.harmonize(&edited, 0, &mut rng).is_err());
+    for from in [2, 3] {
+        let out = model
+            .harmonize(
+                &edited,
+                from,
+                &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+            )
+            .unwrap();
+        assert_eq!(out.dims(), edited.dims());
+        let again = model
+            .harmonize(
+                &edited,
+                from,
+                &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+            )
+            .unwrap();
+        assert_eq!(dist(&out, &again), 0.0);
+    }
+    for bad in [0, 1, 4] {
+        assert!(model.harmonize(&edited, bad, &mut rng).is_err());
+    }
 }
 
 #[test]
@@ -409,4 +475,163 @@ fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
         .flatten_all()
         .unwrap();
     assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+}
+
+/// Random VGG-19 weights with torchvision's names for the convolutions Heitz et al.'s layers
+/// read (up to `relu4_4`), He-scaled so activations neither vanish nor explode, written as
+/// safetensors as swd-loss's tests do.
+fn write_random_vgg19(path: &Path) {
+    const CONVS: [(usize, usize, usize); 12] = [
+        (0, 3, 64),
+        (2, 64, 64),
+        (5, 64, 128),
+        (7, 128, 128),
+        (10, 128, 256),
+        (12, 256, 256),
+        (14, 256, 256),
+        (16, 256, 256),
+        (19, 256, 512),
+        (21, 512, 512),
+        (23, 512, 512),
+        (25, 512, 512),
+    ];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(19);
+    let mut tensors = HashMap::new();
+    for (index, cin, cout) in CONVS {
+        let bound = (6.0 / (9 * cin) as f32).sqrt();
+        let weights: Vec<f32> = (0..cout * cin * 9)
+            .map(|_| rng.random_range(-bound..bound))
+            .collect();
+        let weight = Tensor::from_vec(weights, (cout, cin, 3, 3), &Device::Cpu).unwrap();
+        let bias = Tensor::zeros(cout, candle_core::DType::F32, &Device::Cpu).unwrap();
+        tensors.insert(format!("features.{index}.weight"), weight);
+        tensors.insert(format!("features.{index}.bias"), bias);
+    }
+    candle_core::safetensors::save(&tensors, path).unwrap();
+}
+
+#[test]
+fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let weights = tmp.path().join("vgg19.safetensors");
+    write_random_vgg19(&weights);
+    let config = TrainConfig {
+        swd_features: SwdFeatures::Vgg19,
+        ..micro().with_scales(2).unwrap()
+    };
+    let with_weights = RunOptions {
+        vgg19_weights: Some(weights.clone()),
+        ..RunOptions::default()
+    };
+    let run = tmp.path().join("run");
+    let (_, steps) = run_with(&config, &data, &run, &with_weights);
+    let last = config.scales();
+    for (scale, l) in &steps {
+        let terms = [l.critic, l.penalty, l.adversarial, Some(l.color), l.swd];
+        assert!(
+            terms.iter().flatten().all(|v| v.is_finite()),
+            "scale {scale}: {l:?}"
+        );
+    }
+    assert!(steps.iter().any(|(s, l)| *s == last && l.swd.is_some()));
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    let logged_swd = log.lines().any(|line| {
+        let entry: serde_json::Value = serde_json::from_str(line).unwrap();
+        entry["scale"] == last && entry["swd"].as_f64().is_some_and(f64::is_finite)
+    });
+    assert!(logged_swd, "{log}");
+    let recorded = std::fs::read_to_string(run.join("config.json")).unwrap();
+    assert!(
+        recorded.contains(r#""swd_features": "vgg19""#),
+        "{recorded}"
+    );
+
+    // A resume cannot silently switch to the patch pyramid (the configuration records VGG-19)
+    // nor run VGG-19 without its weights.
+    let switched = train(
+        &TrainConfig {
+            swd_features: SwdFeatures::PatchPyramid,
+            ..config.clone()
+        },
+        &data,
+        &run,
+        &resume(),
+        &Device::Cpu,
+        &mut |_| Control::Continue,
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(switched.contains("swd_features"), "{switched}");
+    let no_weights = train(&config, &data, &run, &resume(), &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(no_weights.contains("vgg19_weights"), "{no_weights}");
+}
+
+#[test]
+fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = TrainConfig {
+        swd_features: SwdFeatures::Vgg19,
+        ..micro()
+    };
+    let broken = tmp.path().join("broken.safetensors");
+    std::fs::write(&broken, b"not safetensors").unwrap();
+    let truncated = tmp.path().join("truncated.safetensors");
+    let conv1 = HashMap::from([(
+        "features.0.weight".to_string(),
+        Tensor::zeros((64, 3, 3, 3), candle_core::DType::F32, &Device::Cpu).unwrap(),
+    )]);
+    candle_core::safetensors::save(&conv1, &truncated).unwrap();
+    for file in [
+        "missing.safetensors",
+        "broken.safetensors",
+        "truncated.safetensors",
+    ] {
+        let path = tmp.path().join(file);
+        let run = tmp.path().join(format!("run_{file}"));
+        let options = RunOptions {
+            vgg19_weights: Some(path.clone()),
+            ..RunOptions::default()
+        };
+        let mut steps = 0;
+        let err = train(&config, &data, &run, &options, &Device::Cpu, &mut |_| {
+            steps += 1;
+            Control::Continue
+        })
+        .err()
+        .unwrap();
+        assert!(matches!(err, Error::Weights { .. }), "{err:?}");
+        assert!(err.to_string().contains(file), "{err}");
+        assert_eq!(steps, 0, "{file}: training started");
+        assert!(!run.exists(), "{file}: the run directory was created");
+    }
+    // Weights given to a run whose SWD loss does not use them are refused, not ignored.
+    let unused = train(
+        &micro(),
+        &data,
+        &tmp.path().join("run_unused"),
+        &RunOptions {
+            vgg19_weights: Some(broken),
+            ..RunOptions::default()
+        },
+        &Device::Cpu,
+        &mut |_| Control::Continue,
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(unused.contains("vgg19_weights"), "{unused}");
+    assert!(TrainConfig {
+        use_swd: false,
+        ..config
+    }
+    .validate()
+    .is_err());
 }

@@ -162,6 +162,44 @@ impl Dataset {
         &self.names
     }
 
+    /// The frames at `indices`, in that order, as a dataset of their own (so [`Dataset::level`]
+    /// resizes only them). Errors on an empty list or an index past the last frame.
+    ///
+    /// ```
+    /// # use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+    /// # let dir = tempfile::tempdir()?;
+    /// # let spec = DatasetSpec { views: 3, resolution: 12, grid: 16, seed: 1 };
+    /// # write_dataset(&singrav::scenes::Islands::new(1), dir.path(), &spec)?;
+    /// let data = Dataset::load(dir.path(), [1.0; 3])?;
+    /// let picked = data.subset(&[2, 0])?;
+    /// assert_eq!(picked.frame_names(), ["images/r_002.png", "images/r_000.png"]);
+    /// assert_eq!(picked.cameras()[1].c2w, data.cameras()[0].c2w);
+    /// assert!(data.subset(&[3]).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn subset(&self, indices: &[usize]) -> Result<Self> {
+        if indices.is_empty() {
+            return Err(invalid("frames", "choose at least one frame"));
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i >= self.len()) {
+            return Err(invalid(
+                "frames",
+                format!(
+                    "frame {bad} does not exist: the dataset has {} (0 to {})",
+                    self.len(),
+                    self.len() - 1
+                ),
+            ));
+        }
+        Ok(Self {
+            width: self.width,
+            height: self.height,
+            cameras: indices.iter().map(|&i| self.cameras[i]).collect(),
+            names: indices.iter().map(|&i| self.names[i].clone()).collect(),
+            frames: indices.iter().map(|&i| self.frames[i].clone()).collect(),
+        })
+    }
+
     /// The dataset resized to `width` x `height` (area filter when shrinking, linear when
     /// enlarging, separately along each axis; any ratio), as tensors on `device`, with the
     /// cameras rescaled to match (same field of view, focal lengths and principal point scaled).

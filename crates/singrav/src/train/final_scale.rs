@@ -7,10 +7,11 @@ use std::collections::HashMap;
 use candle_core::Tensor;
 use patch_gan::upsample_bilinear2x;
 use rand::Rng;
-use swd_loss::{PatchPyramid, PatchPyramidConfig, TextureLoss, TextureLossConfig};
+use swd_loss::{TextureLoss, Vgg19};
 
 use super::critic::Critic;
 use super::run::Stage;
+use super::texture::{texture_loss, SwdExtractor};
 use super::volume_scale::{mse, pick_views, select};
 use super::StepLosses;
 use crate::config::TrainConfig;
@@ -19,20 +20,6 @@ use crate::error::Result;
 use crate::model::{named_vars, SinGrav};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
-
-/// The most levels of the weights-free patch pyramid the SWD loss compares (see
-/// docs/training.md: the paper's VGG-19 features need downloaded weights).
-const SWD_LEVELS: usize = 3;
-
-/// Pyramid levels for `size`-pixel images: as many as keep the coarsest level at least one
-/// patch wide, at most [`SWD_LEVELS`].
-fn swd_levels(size: usize, patch: usize) -> usize {
-    let mut levels = 1;
-    while levels < SWD_LEVELS && (size >> levels) >= patch {
-        levels += 1;
-    }
-    levels
-}
 
 /// The state of the last scale's training.
 pub(super) struct FinalScale<'a> {
@@ -49,16 +36,18 @@ pub(super) struct FinalScale<'a> {
     renderer: ViewRenderer,
     critic: Critic,
     opt: Adam,
-    texture: Option<TextureLoss<PatchPyramid>>,
+    texture: Option<TextureLoss<SwdExtractor>>,
 }
 
 impl<'a> FinalScale<'a> {
-    /// Sets up scale N (the upsampler already pushed onto `model`).
+    /// Sets up scale N (the upsampler already pushed onto `model`); `vgg` holds the VGG-19
+    /// weights when the configuration's SWD loss compares VGG-19 features.
     pub fn new(
         model: &'a SinGrav,
         coarse: DatasetLevel,
         fine: DatasetLevel,
         previous_critic: Option<&HashMap<String, Tensor>>,
+        vgg: Option<&Vgg19>,
         rng: &mut impl Rng,
     ) -> Result<Self> {
         let config = model.config();
@@ -73,14 +62,7 @@ impl<'a> FinalScale<'a> {
         let frozen = model.generate(&model.reconstruction_noise(last)?)?.detach();
         let cameras: Vec<_> = coarse.cameras.iter().collect();
         let (reconstruction, _) = renderer.render(&frozen, &cameras)?;
-        let texture = if config.use_swd {
-            let defaults = PatchPyramidConfig::default();
-            let levels = swd_levels(config.final_image_size(), defaults.patch);
-            let pyramid = PatchPyramid::new(defaults.with_levels(levels))?;
-            Some(TextureLoss::new(pyramid, TextureLossConfig::default())?)
-        } else {
-            None
-        };
+        let texture = texture_loss(config, vgg)?;
         Ok(Self {
             model,
             config,

@@ -7,6 +7,7 @@ mod critic;
 mod final_scale;
 mod log;
 mod run;
+mod texture;
 mod volume_scale;
 
 use std::path::PathBuf;
@@ -28,6 +29,24 @@ pub fn peak_memory_mib() -> Option<f64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib / 1024.0)
+}
+
+/// How [`train`] runs, beside its configuration: settings that do not change what is trained,
+/// so the checkpoint does not record them and a resumed run may give them differently.
+///
+/// ```
+/// let resume = singrav::train::RunOptions { resume: true, ..Default::default() };
+/// assert!(resume.vgg19_weights.is_none());
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RunOptions {
+    /// Continue from the run directory's checkpoint (which must have been made with the same
+    /// configuration); without it, a directory holding a checkpoint is refused.
+    pub resume: bool,
+    /// The VGG-19 weights (safetensors with torchvision's names; docs/swd-loss.md shows how to
+    /// convert them) for a configuration whose `swd_features` is
+    /// [`crate::SwdFeatures::Vgg19`]; required then, refused otherwise.
+    pub vgg19_weights: Option<PathBuf>,
 }
 
 /// What an observer tells the trainer after a step.

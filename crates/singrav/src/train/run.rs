@@ -9,8 +9,9 @@ use candle_core::{Device, Tensor};
 use super::critic::Critic;
 use super::final_scale::FinalScale;
 use super::log::LossLog;
+use super::texture::load_vgg19;
 use super::volume_scale::{picture_path, reconstruction_rmse, VolumeScale};
-use super::{Control, Event, Progress, StepLosses};
+use super::{Control, Event, Progress, RunOptions, StepLosses};
 use crate::checkpoint::{write_config_json, Checkpoint, TrainState, CHECKPOINT_FILE, CONFIG_FILE};
 use crate::config::TrainConfig;
 use crate::dataset::Dataset;
@@ -56,9 +57,11 @@ const SETUP_STREAM: usize = usize::MAX;
 const PICTURE_STREAM: usize = usize::MAX - 1;
 
 /// Trains SinGRAV on `dataset`, writing checkpoints, the loss log, `config.json` and pictures
-/// into `run_dir`. With `resume`, continues from `run_dir`'s checkpoint (which must have been
-/// made with the same configuration) and ends with the same weights as an uninterrupted run.
-/// Without it, refuses a directory that already holds a checkpoint rather than overwrite it.
+/// into `run_dir`. With `options.resume`, continues from `run_dir`'s checkpoint (which must have
+/// been made with the same configuration) and ends with the same weights as an uninterrupted
+/// run. Without it, refuses a directory that already holds a checkpoint rather than overwrite
+/// it. VGG-19 weights the configuration needs (`options.vgg19_weights`) are loaded before
+/// anything is written, so a missing or broken file fails at once with [`Error::Weights`].
 ///
 /// Training needs `CANDLE_GRAD_DO_NOT_DETACH=1` in the environment before the first backward
 /// pass (the gradient penalty differentiates a gradient); without it this returns an error.
@@ -67,11 +70,13 @@ pub fn train(
     config: &TrainConfig,
     dataset: &Dataset,
     run_dir: &Path,
-    resume: bool,
+    options: &RunOptions,
     device: &Device,
     observer: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<TrainOutcome> {
     config.validate()?;
+    let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
+    let resume = options.resume;
     crate::io::create_dir(run_dir)?;
     let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
     let (mut model, mut state, saved) = if resume {
@@ -163,7 +168,14 @@ pub fn train(
             let size = *config.image_sizes.last().unwrap_or(&0);
             let coarse = dataset.level(size, size, device)?;
             let fine = dataset.level(2 * size, 2 * size, device)?;
-            Box::new(FinalScale::new(&model, coarse, fine, previous, &mut setup)?)
+            Box::new(FinalScale::new(
+                &model,
+                coarse,
+                fine,
+                previous,
+                vgg.as_ref(),
+                &mut setup,
+            )?)
         };
         if let Some(tensors) = restore.take() {
             restore_stage(stage.as_mut(), tensors, &state, &checkpoint_file, device)?;

@@ -1,5 +1,5 @@
-//! Multi-view metrics of generated scenes. Diversity-MV is here; SIFID-MV needs InceptionV3
-//! weights, which cannot be downloaded on our machines, so it is not implemented.
+//! Diversity-MV: how much generated scenes differ from each other, per view, relative to the
+//! contrast of the real view.
 
 use candle_core::{Tensor, D};
 

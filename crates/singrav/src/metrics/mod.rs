@@ -1,0 +1,21 @@
+//! Multi-view metrics of generated scenes, as the paper evaluates SinGRAV: render every generated
+//! scene from cameras of the training data, then compare each rendering with the real view from
+//! the same camera (see `docs/metrics.md` for what the numbers mean).
+//!
+//! - [`diversity_mv`]: per view, the spread of the generated scenes relative to the contrast of
+//!   the real view; averaged over views. Needs no weights.
+//! - [`sifid_mv`]: SinGAN's SIFID ([`sifid`]) between each generated view and the real one,
+//!   averaged over views and scenes. Needs InceptionV3's first block
+//!   ([`InceptionBlock1::from_safetensors`], weights converted from torchvision).
+//! - [`FeatureGaussian`]: the Fréchet distance between Gaussians fitted to feature sets, which
+//!   SIFID (and FID) is.
+
+mod diversity;
+mod frechet;
+mod inception;
+mod sifid;
+
+pub use diversity::diversity_mv;
+pub use frechet::FeatureGaussian;
+pub use inception::InceptionBlock1;
+pub use sifid::{sifid, sifid_mv};

@@ -1,0 +1,39 @@
+//! Helpers shared by the CLI tests: run the `volgen` binary and check how it ended.
+
+// Each test binary compiles this module and uses a different part of it.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Runs the `volgen` binary built for these tests.
+pub fn volgen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volgen"))
+        .args(args)
+        .output()
+        .expect("volgen runs")
+}
+
+/// The stdout of a run that must succeed (both streams shown if it did not).
+pub fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The stderr of a run that must fail without panicking.
+pub fn failure(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "should have failed: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+/// A path as a command-line argument.
+pub fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
