@@ -47,6 +47,7 @@
 mod camera;
 mod config;
 mod error;
+mod grad_pool;
 mod image;
 mod kernel;
 mod op;
@@ -58,6 +59,7 @@ mod transforms;
 pub use camera::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 pub use config::{Outputs, RenderConfig, Sampler};
 pub use error::{Error, Result};
+pub use grad_pool::release_gradient_buffers;
 pub use image::{render_image, Image};
 pub use op::{render, render_batch, RenderOutput};
 pub use rays::Rays;

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use crate::config::RenderConfig;
 use crate::error::{invalid, Error, Result};
+use crate::grad_pool::{self, Pooled};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
 use crate::rays::Rays;
 /// The most gradient buffers the backward allocates per volume.
@@ -199,7 +200,7 @@ struct CompositeOp<T> {
     isa: Isa,
 }
 
-impl<T: Real + WithDType> CompositeOp<T> {
+impl<T: Pooled + WithDType> CompositeOp<T> {
     fn new(
         volumes: &Tensor,
         dims: GridDims,
@@ -298,7 +299,7 @@ impl<T: Real + WithDType> CompositeOp<T> {
             let buffers: Vec<Vec<[T; 4]>> = (0..blocks)
                 .into_par_iter()
                 .map(|block| {
-                    let mut buf = vec![[T::zero(); 4]; voxels];
+                    let mut buf = grad_pool::take::<T>(voxels);
                     for tile in (block..tiles).step_by(blocks) {
                         let rays_in_tile = tile * TILE..((tile + 1) * TILE).min(rays.len());
                         let rows = (first_ray + rays_in_tile.start) * PACKED
@@ -339,6 +340,7 @@ impl<T: Real + WithDType> CompositeOp<T> {
                         (s[j], r[j], g[j], bl[j]) = (acc[0], acc[1], acc[2], acc[3]);
                     }
                 });
+            grad_pool::give_back(buffers, BLOCKS);
         }
         out
     }
@@ -412,7 +414,7 @@ fn interleave<T: Real>(
         .collect()
 }
 
-impl<T: Real + WithDType> CustomOp1 for CompositeOp<T> {
+impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
     fn name(&self) -> &'static str {
         "volrender-composite"
     }
