@@ -19,19 +19,7 @@ use crate::error::{invalid, Result};
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn diversity_mv(generated: &[Tensor], real: &Tensor) -> Result<f64> {
-    if generated.len() < 2 {
-        return Err(invalid("generated", "need at least two scenes"));
-    }
-    if let Some(bad) = generated.iter().find(|g| g.shape() != real.shape()) {
-        return Err(invalid(
-            "generated",
-            format!(
-                "scene views {:?} differ from the real views {:?}",
-                bad.dims(),
-                real.dims()
-            ),
-        ));
-    }
+    super::check_scenes(generated, real, 2)?;
     let views = real.dim(0)?;
     let stack = Tensor::stack(generated, 0)?.to_dtype(candle_core::DType::F64)?;
     // Population standard deviation over scenes, per view and pixel.

@@ -19,3 +19,32 @@ pub use diversity::diversity_mv;
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
 pub use sifid::{sifid, sifid_mv};
+
+/// Checks the multi-view metrics' input: at least `min_scenes` scenes, each seen from exactly
+/// the real views' cameras at their size (same shape as `real`).
+fn check_scenes(
+    generated: &[candle_core::Tensor],
+    real: &candle_core::Tensor,
+    min_scenes: usize,
+) -> crate::error::Result<()> {
+    if generated.len() < min_scenes {
+        return Err(crate::error::invalid(
+            "generated",
+            format!(
+                "need at least {min_scenes} scene(s), got {}",
+                generated.len()
+            ),
+        ));
+    }
+    if let Some(bad) = generated.iter().find(|g| g.shape() != real.shape()) {
+        return Err(crate::error::invalid(
+            "generated",
+            format!(
+                "scene views {:?} differ from the real views {:?}",
+                bad.dims(),
+                real.dims()
+            ),
+        ));
+    }
+    Ok(())
+}

@@ -56,19 +56,7 @@ pub fn sifid(real: &Tensor, fake: &Tensor, block: &InceptionBlock1) -> Result<f6
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn sifid_mv(generated: &[Tensor], real: &Tensor, block: &InceptionBlock1) -> Result<f64> {
-    if generated.is_empty() {
-        return Err(invalid("generated", "need at least one scene"));
-    }
-    if let Some(bad) = generated.iter().find(|g| g.shape() != real.shape()) {
-        return Err(invalid(
-            "generated",
-            format!(
-                "scene views {:?} differ from the real views {:?}",
-                bad.dims(),
-                real.dims()
-            ),
-        ));
-    }
+    super::check_scenes(generated, real, 1)?;
     let real = view_gaussians(real, block)?;
     let mut total = 0.0;
     for scene in generated {
