@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use singrav::metrics::InceptionBlock1;
 
 mod common;
-use common::{failure, ok, path, volgen};
+use common::{failure, ok, path, train_micro, volgen};
 
 /// Random InceptionV3 first-block weights with torchvision's names (real ones cannot be
 /// downloaded here); variances positive, as a BatchNorm's are.
@@ -46,27 +46,7 @@ fn json(path: &Path) -> serde_json::Value {
 #[test]
 fn eval_reports_diversity_and_with_weights_sifid() {
     let tmp = tempfile::tempdir().unwrap();
-    let (data, run) = (tmp.path().join("data"), tmp.path().join("run"));
-    ok(&volgen(&[
-        "scene",
-        "stones",
-        "--out",
-        path(&data),
-        "--views",
-        "6",
-        "--resolution",
-        "36",
-        "--grid",
-        "24",
-    ]));
-    ok(&volgen(&[
-        "train",
-        path(&data),
-        "--out",
-        path(&run),
-        "--preset",
-        "micro",
-    ]));
+    let (data, run) = train_micro(tmp.path());
     let base = [
         "eval",
         path(&run),

@@ -7,7 +7,7 @@ use std::path::Path;
 use radiance_volume::RadianceVolume;
 
 mod common;
-use common::{failure, ok, path, volgen};
+use common::{failure, ok, path, train_micro, volgen};
 
 #[test]
 fn demo_writes_dataset_model_samples_pictures_and_summary() {
@@ -200,28 +200,7 @@ fn trained_micro() -> &'static Path {
     RUN.get_or_init(|| {
         let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli_singrav_micro");
         let _ = std::fs::remove_dir_all(&root);
-        let (data, run) = (root.join("data"), root.join("run"));
-        ok(&volgen(&[
-            "scene",
-            "stones",
-            "--out",
-            path(&data),
-            "--views",
-            "6",
-            "--resolution",
-            "36",
-            "--grid",
-            "32",
-        ]));
-        ok(&volgen(&[
-            "train",
-            path(&data),
-            "--out",
-            path(&run),
-            "--preset",
-            "micro",
-        ]));
-        run
+        train_micro(&root).1
     })
 }
 

@@ -37,3 +37,30 @@ pub fn failure(out: &Output) -> String {
 pub fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
+
+/// Renders a tiny stones dataset (6 views at 36^2) into `root/data` and trains the `micro`
+/// preset on it into `root/run`; returns `(data, run)`.
+pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (data, run) = (root.join("data"), root.join("run"));
+    ok(&volgen(&[
+        "scene",
+        "stones",
+        "--out",
+        path(&data),
+        "--views",
+        "6",
+        "--resolution",
+        "36",
+        "--grid",
+        "32",
+    ]));
+    ok(&volgen(&[
+        "train",
+        path(&data),
+        "--out",
+        path(&run),
+        "--preset",
+        "micro",
+    ]));
+    (data, run)
+}
