@@ -87,6 +87,16 @@ fn assert_same_tensors(a: &HashMap<String, Tensor>, b: &HashMap<String, Tensor>)
     }
 }
 
+/// The message of a training run that must fail before or during its first step.
+fn train_error(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> String {
+    train(config, data, run, options, &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .err()
+    .expect("training should have failed")
+    .to_string()
+}
+
 #[test]
 fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let tmp = tempfile::tempdir().unwrap();
@@ -287,28 +297,13 @@ fn resume_refuses_another_configuration_and_names_the_field() {
         lambda_depth: 1.0,
         ..config
     };
-    let err = train(&other, &data, &run, &resume(), &Device::Cpu, &mut |_| {
-        Control::Continue
-    })
-    .err()
-    .unwrap()
-    .to_string();
+    let err = train_error(&other, &data, &run, &resume());
     assert!(
         err.contains("lambda_depth") && err.contains(CHECKPOINT_FILE),
         "{err}"
     );
 
-    let missing = train(
-        &other,
-        &data,
-        &tmp.path().join("empty"),
-        &resume(),
-        &Device::Cpu,
-        &mut |_| Control::Continue,
-    )
-    .err()
-    .unwrap()
-    .to_string();
+    let missing = train_error(&other, &data, &tmp.path().join("empty"), &resume());
     assert!(missing.contains("no checkpoint"), "{missing}");
 }
 
@@ -549,7 +544,7 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
 
     // A resume cannot silently switch to the patch pyramid (the configuration records VGG-19)
     // nor run VGG-19 without its weights.
-    let switched = train(
+    let switched = train_error(
         &TrainConfig {
             swd_features: SwdFeatures::PatchPyramid,
             ..config.clone()
@@ -557,19 +552,9 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
         &data,
         &run,
         &resume(),
-        &Device::Cpu,
-        &mut |_| Control::Continue,
-    )
-    .err()
-    .unwrap()
-    .to_string();
+    );
     assert!(switched.contains("swd_features"), "{switched}");
-    let no_weights = train(&config, &data, &run, &resume(), &Device::Cpu, &mut |_| {
-        Control::Continue
-    })
-    .err()
-    .unwrap()
-    .to_string();
+    let no_weights = train_error(&config, &data, &run, &resume());
     assert!(no_weights.contains("vgg19_weights"), "{no_weights}");
 }
 
@@ -613,7 +598,7 @@ fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
         assert!(!run.exists(), "{file}: the run directory was created");
     }
     // Weights given to a run whose SWD loss does not use them are refused, not ignored.
-    let unused = train(
+    let unused = train_error(
         &micro(),
         &data,
         &tmp.path().join("run_unused"),
@@ -621,12 +606,7 @@ fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
             vgg19_weights: Some(broken),
             ..RunOptions::default()
         },
-        &Device::Cpu,
-        &mut |_| Control::Continue,
-    )
-    .err()
-    .unwrap()
-    .to_string();
+    );
     assert!(unused.contains("vgg19_weights"), "{unused}");
     assert!(TrainConfig {
         use_swd: false,
