@@ -41,6 +41,10 @@ impl Sampler {
     }
 }
 
+/// The most samples a ray may take: sample positions are computed from the sample's index in
+/// the kernel's precision, which is exact for f32 up to `2^24`.
+pub const MAX_SAMPLES_PER_RAY: usize = 1 << 24;
+
 /// Which outputs besides colour to compute (the others are not computed at all).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Outputs {
@@ -168,6 +172,14 @@ impl RenderConfig {
             }
             Sampler::PerVoxel { per_voxel: 0 } => {
                 return Err(invalid("sampler", "expected at least 1 sample per voxel"))
+            }
+            Sampler::Uniform { samples } | Sampler::UniformLeft { samples }
+                if samples > MAX_SAMPLES_PER_RAY =>
+            {
+                return Err(invalid(
+                    "sampler",
+                    format!("expected at most {MAX_SAMPLES_PER_RAY} samples per ray, got {samples}"),
+                ))
             }
             _ => {}
         }

@@ -57,7 +57,7 @@ pub mod scenes;
 mod transforms;
 
 pub use camera::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
-pub use config::{Outputs, RenderConfig, Sampler};
+pub use config::{Outputs, RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
 pub use error::{Error, Result};
 pub use grad_pool::release_gradient_buffers;
 pub use image::{render_image, Image};

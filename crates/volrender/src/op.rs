@@ -17,7 +17,7 @@ use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor, WithDType
 use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume};
 use rayon::prelude::*;
 
-use crate::config::RenderConfig;
+use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
 use crate::error::{invalid, Error, Result};
 use crate::grad_pool::{self, Pooled};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
@@ -104,6 +104,32 @@ pub fn render_batch(
                 volumes.shape()
             ),
         ));
+    }
+    if u32::try_from(d * h * w).is_err() {
+        return Err(Error::Unsupported {
+            what: "volumes",
+            why: format!(
+                "the kernel indexes voxels with 32 bits; a {d} x {h} x {w} grid has more than {} voxels",
+                u32::MAX
+            )
+            .into(),
+        });
+    }
+    if let Sampler::PerVoxel { per_voxel } = cfg.sampler {
+        // A ray is at most the box's diagonal long, and steps are at most the smallest voxel
+        // edge over per_voxel.
+        let size = cfg.aabb.max - cfg.aabb.min;
+        let voxel = (size / glam::Vec3::new(w as f32, h as f32, d as f32)).min_element() as f64;
+        let most = (size.length() as f64 / voxel * per_voxel as f64).ceil();
+        if most > MAX_SAMPLES_PER_RAY as f64 {
+            return Err(invalid(
+                "sampler",
+                format!(
+                    "{per_voxel} samples per voxel give up to {most} samples per ray on this grid; \
+                     at most {MAX_SAMPLES_PER_RAY} are supported"
+                ),
+            ));
+        }
     }
     if n != rays.len() {
         return Err(invalid(

@@ -11,9 +11,12 @@
 //! and the bracket is `total - sum_{k<=i} w_k x_k`, which the forward's output gives us.
 //! For opacity `dA/dtau_i = T_N`. Finally `dL/dsigma_i = delta_i dL/dtau_i` and
 //! `dL/dc_i = w_i dL/dC`. One pass, in sample order, with no per-sample storage.
+//!
+//! Samples arrive in chunks (`chunk`) with their values and attenuation already computed; the
+//! loops here are the sequential part.
 
-use super::march::{Marcher, OccView, RayGeom};
-use super::trilinear::{corners, gather, scatter, Corners};
+use super::chunk::Chunks;
+use super::march::{OccView, RayGeom};
 use super::{Real, VolumeView};
 
 /// Per-render constants of the compositing.
@@ -35,60 +38,6 @@ pub(crate) struct RayOut<T> {
     pub(crate) trans: T,
 }
 
-/// Returns `(alpha, 1 - alpha)` = `(1 - exp(-tau), exp(-tau))` with one cheap call per sample:
-/// below `tau = 1e-3` a 5-term series keeps alpha to full relative precision (its truncation
-/// error, `tau^5 / 720`, is below f64's rounding), above it `1 - exp(-tau)` loses at most a few
-/// ulp of 1 in absolute terms. (`expm1` would do both but costs a quarter of the f32 forward.)
-#[inline(always)]
-fn attenuation<T: Real>(tau: T) -> (T, T) {
-    if tau < T::of(1e-3) {
-        let one = T::one();
-        let series = one
-            - tau / T::of(2.0)
-                * (one - tau / T::of(3.0) * (one - tau / T::of(4.0) * (one - tau / T::of(5.0))));
-        let alpha = tau * series;
-        (alpha, one - alpha)
-    } else {
-        let e = (-tau).exp_nonpositive();
-        (T::one() - e, e)
-    }
-}
-
-/// One ray's samples with their trilinear corners and interpolated `[sigma, r, g, b]`, in order.
-/// Samples outside the grid and samples in blocks the occupancy grid marks empty (density
-/// exactly 0 there, so they add nothing to the forward or the backward) are passed over.
-struct Samples<'a, T> {
-    vol: &'a VolumeView<'a, T>,
-    occ: Option<&'a OccView<'a>>,
-    marcher: Marcher<'a, T>,
-}
-
-impl<'a, T: Real> Samples<'a, T> {
-    #[inline(always)]
-    fn new(vol: &'a VolumeView<'a, T>, occ: Option<&'a OccView<'a>>, g: &'a RayGeom<T>) -> Self {
-        Self {
-            vol,
-            occ,
-            marcher: Marcher::new(g, occ),
-        }
-    }
-
-    #[inline(always)]
-    fn next_sample(&mut self) -> Option<(T, Corners<T>, [T; 4])> {
-        while let Some((t, u)) = self.marcher.next_sample() {
-            let Some(c) = corners(self.vol.n, u) else {
-                continue;
-            };
-            if self.occ.is_some_and(|o| o.empty_block[c.idx[0]]) {
-                // Density exactly 0 at this sample: it adds nothing (skipping is on).
-                continue;
-            }
-            return Some((t, c, gather(self.vol, &c)));
-        }
-        None
-    }
-}
-
 /// Renders one ray.
 #[inline(always)]
 pub(crate) fn forward_ray<T: Real>(
@@ -100,22 +49,26 @@ pub(crate) fn forward_ray<T: Real>(
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
-    let mut samples = Samples::new(vol, occ, g);
-    while let Some((t, _, v)) = samples.next_sample() {
-        let (alpha, keep) = attenuation(v[0] * g.dt);
-        let w = trans * alpha;
-        for ch in 0..3 {
-            rgb[ch] = rgb[ch] + w * v[ch + 1];
-        }
-        if p.depth {
-            depth = depth + w * t;
-        }
-        if p.opacity {
-            opacity = opacity + w;
-        }
-        trans = trans * keep;
-        if trans <= p.epsilon {
-            break;
+    let mut chunks = Chunks::new(vol, occ, g);
+    'ray: while let Some(c) = chunks.next_chunk() {
+        for l in 0..c.len {
+            if !c.live[l] {
+                continue;
+            }
+            let w = trans * c.alpha[l];
+            for ch in 0..3 {
+                rgb[ch] = rgb[ch] + w * c.value[l][ch + 1];
+            }
+            if p.depth {
+                depth = depth + w * c.t[l];
+            }
+            if p.opacity {
+                opacity = opacity + w;
+            }
+            trans = trans * c.keep[l];
+            if trans <= p.epsilon {
+                break 'ray;
+            }
         }
     }
     for ch in 0..3 {
@@ -147,18 +100,23 @@ pub(crate) fn backward_ray<T: Real>(
     let opacity_term = ga * out.trans;
     let mut upto = T::zero();
     let mut trans = T::one();
-    let mut samples = Samples::new(vol, occ, g);
-    while let Some((t, c, v)) = samples.next_sample() {
-        let (alpha, keep) = attenuation(v[0] * g.dt);
-        let w = trans * alpha;
-        let next = trans * keep;
-        let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * t;
-        upto = upto + w * x;
-        let d_tau = next * x - (total - upto) + opacity_term;
-        scatter(buf, &c, [d_tau * g.dt, w * gr, w * gg, w * gb]);
-        trans = next;
-        if trans <= p.epsilon {
-            break;
+    let mut chunks = Chunks::new(vol, occ, g);
+    'ray: while let Some(c) = chunks.next_chunk() {
+        for l in 0..c.len {
+            if !c.live[l] {
+                continue;
+            }
+            let v = c.value[l];
+            let w = trans * c.alpha[l];
+            let next = trans * c.keep[l];
+            let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * c.t[l];
+            upto = upto + w * x;
+            let d_tau = next * x - (total - upto) + opacity_term;
+            c.scatter(l, buf, [d_tau * g.dt, w * gr, w * gg, w * gb]);
+            trans = next;
+            if trans <= p.epsilon {
+                break 'ray;
+            }
         }
     }
 }
@@ -167,6 +125,7 @@ pub(crate) fn backward_ray<T: Real>(
 mod tests {
     use super::*;
     use crate::config::Sampler;
+    use crate::kernel::chunk::attenuation;
     use crate::kernel::march::{setup_ray, GridSpec};
 
     #[test]

@@ -25,9 +25,10 @@ const SMALLEST_NORMAL_LN: f32 = -87.336_54;
 /// >= `f32::MIN_POSITIVE`, 0 below that.
 #[inline(always)]
 pub(crate) fn exp_nonpositive(x: f32) -> f32 {
-    if x < SMALLEST_NORMAL_LN {
-        return 0.0;
-    }
+    // Computed for every x and the flush selected at the end, without a branch, so that loops
+    // over several samples vectorise. (NaN stays NaN: both comparisons are false.)
+    let flush = x < SMALLEST_NORMAL_LN;
+    let x = if flush { SMALLEST_NORMAL_LN } else { x };
     let n = (x * std::f32::consts::LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
     let r = (x - n * LN2_HI) - n * LN2_LO;
     // e^r = sum r^k / k!, by Estrin's scheme: independent pairs joined by r^2 and r^4, so the
@@ -42,7 +43,11 @@ pub(crate) fn exp_nonpositive(x: f32) -> f32 {
     let p = (p01 + r2 * p23) + r4 * (p45 + r2 * p67);
     // n is in [-126, 0] here, so 127 + n is a valid biased exponent of a normal f32.
     let scale = f32::from_bits(((127 + n as i32) as u32) << 23);
-    p * scale
+    if flush {
+        0.0
+    } else {
+        p * scale
+    }
 }
 
 #[cfg(test)]

@@ -111,39 +111,72 @@ enum Cell<T> {
     Empty { next: usize },
 }
 
-impl OccView<'_> {
-    /// Classifies the cell of sample `i` (at `t`, index point `u`) and finds where the ray leaves
-    /// it. Samples before the exit are in the same cell up to rounding far below the half-voxel
-    /// margin, so skipping them when it is empty is exact, and not re-checking them when it is
-    /// occupied is merely conservative.
-    #[inline(always)]
-    fn classify<T: Real>(&self, g: &RayGeom<T>, u: [T; 3], i: usize) -> Cell<T> {
-        let k = T::of(self.k as f64);
-        let half = T::of(0.5);
-        let mut cell = [0usize; 3];
-        for a in 0..3 {
-            // Truncation of a value >= 0 is floor.
-            let c = ((u[a] + half) / k).max(T::zero()).to_usize().unwrap_or(0);
-            cell[a] = c.min(self.n[a] - 1);
+/// One ray's walk through an occupancy grid, with the per-ray constants its cell lookups need
+/// (so a lookup multiplies instead of dividing).
+struct CellWalk<'a, T> {
+    occ: &'a OccView<'a>,
+    /// Voxels per cell, and its inverse.
+    cell: T,
+    inv_cell: T,
+    /// The last cell's index per axis.
+    last: [T; 3],
+    /// `1 / b` per axis (unused along axes the ray is parallel to).
+    inv_b: [T; 3],
+    /// 1 where the ray leaves a cell through its upper face, 0 through its lower one.
+    side: [T; 3],
+    inv_dt: T,
+}
+
+impl<'a, T: Real> CellWalk<'a, T> {
+    fn new(occ: &'a OccView<'a>, g: &RayGeom<T>) -> Self {
+        let cell = T::of(occ.k as f64);
+        Self {
+            occ,
+            cell,
+            inv_cell: T::one() / cell,
+            last: occ.n.map(|n| T::of((n - 1) as f64)),
+            inv_b: g.b.map(|b| T::one() / b),
+            side: g.b.map(|b| if b > T::zero() { T::one() } else { T::zero() }),
+            inv_dt: T::one() / g.dt,
         }
+    }
+
+    /// Classifies the cell of sample `i` (at index point `u`) and finds where the ray leaves
+    /// it. Samples before the exit are in the same cell up to rounding far below the half-voxel
+    /// margin (as are samples that rounding puts in a neighbouring cell), so skipping them when
+    /// it is empty is exact, and not re-checking them when it is occupied is merely
+    /// conservative.
+    #[inline(always)]
+    fn classify(&self, g: &RayGeom<T>, u: [T; 3], i: usize) -> Cell<T> {
+        let half = T::of(0.5);
         let mut t_exit = T::infinity();
+        let mut flat = 0;
+        let mut stride = 1;
         for a in 0..3 {
+            // Plain comparisons compile to single min/max instructions (u is not NaN).
+            let c = (u[a] + half) * self.inv_cell;
+            let c = if c > T::zero() { c } else { T::zero() };
+            let c = if c < self.last[a] { c } else { self.last[a] };
+            // Truncation of a value >= 0 is floor.
+            let index = c.truncate_index();
+            flat += index as usize * stride;
+            stride *= self.occ.n[a];
             if g.b[a] != T::zero() {
-                let far_side = if g.b[a] > T::zero() {
-                    T::one()
-                } else {
-                    T::zero()
-                };
-                let bound = (T::of(cell[a] as f64) + far_side) * k - half;
-                t_exit = t_exit.min((bound - g.a[a]) / g.b[a]);
+                let bound = (T::of_index(index) + self.side[a]) * self.cell - half;
+                let t = (bound - g.a[a]) * self.inv_b[a];
+                t_exit = if t < t_exit { t } else { t_exit };
             }
         }
-        if self.occupied[(cell[2] * self.n[1] + cell[1]) * self.n[0] + cell[0]] {
+        if self.occ.occupied[flat] {
             return Cell::Occupied { until: t_exit };
         }
-        let x = ((t_exit - g.t0) / g.dt - g.off).max(T::zero());
-        let mut next = x.to_usize().unwrap_or(g.n);
-        if T::of(next as f64) < x {
+        // The first sample index at or past the exit, clamped to [0, n] before converting.
+        let x = (t_exit - g.t0) * self.inv_dt - g.off;
+        let x = if x > T::zero() { x } else { T::zero() };
+        let n = T::of_index(g.n as u32);
+        let x = if x < n { x } else { n };
+        let mut next = x.truncate_index() as usize;
+        if T::of_index(next as u32) < x {
             next += 1; // ceil
         }
         Cell::Empty {
@@ -160,7 +193,7 @@ impl OccView<'_> {
 /// optimising is one LLVM declines to inline.
 pub(crate) struct Marcher<'a, T> {
     g: &'a RayGeom<T>,
-    occ: Option<&'a OccView<'a>>,
+    walk: Option<CellWalk<'a, T>>,
     i: usize,
     checked_until: T,
 }
@@ -170,7 +203,7 @@ impl<'a, T: Real> Marcher<'a, T> {
     pub(crate) fn new(g: &'a RayGeom<T>, occ: Option<&'a OccView<'a>>) -> Self {
         Self {
             g,
-            occ,
+            walk: occ.filter(|_| g.n > 0).map(|o| CellWalk::new(o, g)),
             i: 0,
             checked_until: T::neg_infinity(),
         }
@@ -182,15 +215,15 @@ impl<'a, T: Real> Marcher<'a, T> {
         let g = self.g;
         while self.i < g.n {
             let i = self.i;
-            let t = g.t0 + (T::of(i as f64) + g.off) * g.dt;
+            let t = g.t0 + (T::of_index(i as u32) + g.off) * g.dt;
             let u = [
                 g.a[0] + t * g.b[0],
                 g.a[1] + t * g.b[1],
                 g.a[2] + t * g.b[2],
             ];
-            if let Some(o) = self.occ {
+            if let Some(walk) = &self.walk {
                 if t >= self.checked_until {
-                    match o.classify(g, u, i) {
+                    match walk.classify(g, u, i) {
                         Cell::Occupied { until } => self.checked_until = until,
                         Cell::Empty { next } => {
                             self.i = next;

@@ -1,6 +1,7 @@
-//! The CPU kernels, generic over `f32` and `f64`: ray setup and sample marching (`march`), the
-//! trilinear gather/scatter (`trilinear`), and per-ray compositing forward and backward
-//! (`composite`). Slices in, values out; no tensors here.
+//! The CPU kernels, generic over `f32` and `f64`: ray setup and sample marching (`march`),
+//! chunks of samples interpolated and attenuated together (`chunk`), and per-ray compositing
+//! forward and backward (`composite`); `trilinear` is the corner-weight form of the
+//! interpolation that the reference path uses. Slices in, values out; no tensors here.
 //!
 //! The volume is read from an interleaved copy, one `[sigma, r, g, b]` per voxel: a trilinear
 //! sample then touches 8 runs of 16 (f32) bytes instead of 32 scattered floats.
@@ -8,6 +9,7 @@
 // Channel and axis loops index several small arrays in step; index loops read clearest.
 #![allow(clippy::needless_range_loop)]
 
+mod chunk;
 mod composite;
 mod exp;
 mod march;
@@ -31,8 +33,12 @@ pub(crate) trait Real: Float + Send + Sync + std::fmt::Debug + Default + 'static
     fn exp_nonpositive(self) -> Self;
 
     /// Truncates a value known to be in `[0, 2^31)` to an index: one conversion instruction
-    /// (through `i32`) instead of the range-checked float-to-`usize` sequence.
-    fn truncate_index(self) -> usize;
+    /// (through `i32`) instead of the range-checked float-to-integer sequence.
+    fn truncate_index(self) -> u32;
+
+    /// Converts an index below `2^31` exactly (below `2^24` for f32): one conversion
+    /// instruction (through `i32`), where `of(i as f64)` takes two.
+    fn of_index(i: u32) -> Self;
 }
 
 impl Real for f32 {
@@ -47,8 +53,13 @@ impl Real for f32 {
     }
 
     #[inline(always)]
-    fn truncate_index(self) -> usize {
-        self as i32 as usize
+    fn truncate_index(self) -> u32 {
+        self as i32 as u32
+    }
+
+    #[inline(always)]
+    fn of_index(i: u32) -> Self {
+        i as i32 as f32
     }
 }
 
@@ -64,8 +75,13 @@ impl Real for f64 {
     }
 
     #[inline(always)]
-    fn truncate_index(self) -> usize {
-        self as i32 as usize
+    fn truncate_index(self) -> u32 {
+        self as i32 as u32
+    }
+
+    #[inline(always)]
+    fn of_index(i: u32) -> Self {
+        i as i32 as f64
     }
 }
 
