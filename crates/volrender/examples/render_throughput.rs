@@ -7,6 +7,9 @@
 //! cargo run --release -p volrender --example render_throughput -- \
 //!     --grid 64 --samples 128 --rays 65536 --scene sparse --backward --threads 2 [--skip-empty]
 //! ```
+//! Like the peer, it tunes glibc's malloc first (see `tune_malloc`; `--no-mallopt` keeps the
+//! defaults), so both sides allocate under the same conditions.
+//!
 //! `--grid-npy DIR/grid.npy` renders the `(4, D, H, W)` volume the peer saved with
 //! `torch_render.py --save DIR`, over the box that puts volgen's cell centres on the peer's
 //! `align_corners=True` lattice.
@@ -64,9 +67,31 @@ struct Args {
     warmup: usize,
     #[arg(long, default_value_t = 7)]
     repeats: usize,
+    /// Keep glibc's default malloc behaviour (as the peer's `--no-mallopt`).
+    #[arg(long)]
+    no_mallopt: bool,
     /// Seed of the dense scene.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+}
+
+/// Keeps freed memory in the glibc heap instead of returning it to the system, exactly as the
+/// peer's `tune_malloc` does (`M_MMAP_MAX = 0`, `M_TRIM_THRESHOLD = 2^30`): otherwise every
+/// multi-megabyte buffer a render or its autograd allocates (the interleaved volume copy, the
+/// gradient, candle's gradient sum) is mapped afresh and page-faulted in on each call. Returns
+/// whether it was applied.
+fn tune_malloc() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallopt only sets allocator parameters; it is called before any other thread
+        // exists.
+        unsafe {
+            libc::mallopt(libc::M_MMAP_MAX, 0) == 1
+                && libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30) == 1
+        }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    false
 }
 
 /// Returns the median and all run times in seconds.
@@ -91,6 +116,7 @@ fn time(
 
 fn main() -> Result<()> {
     let a = Args::parse();
+    let mallopt = !a.no_mallopt && tune_malloc();
     rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads)
         .build_global()?;
@@ -155,7 +181,7 @@ fn main() -> Result<()> {
     let mut res = serde_json::json!({
         "impl": "volrender-cpu", "scene": grid_npy.clone().unwrap_or(a.scene.clone()), "grid": volume.dim(3)?,
         "rays": rays.len(), "samples": a.samples, "threads": a.threads, "sampling": a.sampling,
-        "skip_empty": a.skip_empty, "cell": a.cell, "epsilon": a.epsilon,
+        "skip_empty": a.skip_empty, "cell": a.cell, "epsilon": a.epsilon, "mallopt": mallopt,
         "hit_opacity_fraction": hit,
         "fwd_s": fwd_s, "fwd_rays_per_s": r / fwd_s, "fwd_samples_per_s": r * m / fwd_s,
         "fwd_runs_s": fwd_runs,

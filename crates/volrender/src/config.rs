@@ -178,7 +178,9 @@ impl RenderConfig {
             {
                 return Err(invalid(
                     "sampler",
-                    format!("expected at most {MAX_SAMPLES_PER_RAY} samples per ray, got {samples}"),
+                    format!(
+                        "expected at most {MAX_SAMPLES_PER_RAY} samples per ray, got {samples}"
+                    ),
                 ))
             }
             _ => {}

@@ -46,6 +46,7 @@
 
 mod camera;
 mod config;
+mod empty_space;
 mod error;
 mod grad_pool;
 mod image;

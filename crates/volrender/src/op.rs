@@ -14,10 +14,11 @@
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor, WithDType};
-use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume};
+use radiance_volume::GridDims;
 use rayon::prelude::*;
 
 use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
+use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
 use crate::grad_pool::{self, Pooled};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
@@ -148,7 +149,7 @@ pub fn render_batch(
     let dims = GridDims::new(d, h, w);
     let occupancy = if cfg.skip_empty {
         (0..n)
-            .map(|i| occupancy_cells(&volumes.get(i)?, cfg))
+            .map(|i| CellDistances::build(&volumes.get(i)?, cfg))
             .collect::<Result<Vec<_>>>()?
     } else {
         Vec::new()
@@ -182,42 +183,13 @@ pub fn render_batch(
         .collect()
 }
 
-/// An occupancy grid's cells, flattened (z, y, x), as the kernel reads them.
-#[derive(Debug, Clone)]
-struct Occupancy {
-    occupied: Vec<bool>,
-    n: [usize; 3],
-    k: usize,
-}
-
-/// Builds radiance-volume's occupancy grid (threshold 0) of one `(C, D, H, W)` volume.
-///
-/// For f64 volumes it is built from the f32-rounded density, so densities below f32's smallest
-/// subnormal (about 1.4e-45) count as empty.
-fn occupancy_cells(volume: &Tensor, cfg: &RenderConfig) -> Result<Occupancy> {
-    let physical = RadianceVolume::new(volume.narrow(0, 0, 4)?.detach(), cfg.aabb)?;
-    let grid = OccupancyGrid::build(&physical, cfg.occupancy_cell, 0.0)?;
-    let dims = grid.dims();
-    let mut occupied = Vec::with_capacity(dims.voxel_count());
-    for z in 0..dims.d {
-        for y in 0..dims.h {
-            occupied.extend((0..dims.w).map(|x| grid.is_occupied(z, y, x)));
-        }
-    }
-    Ok(Occupancy {
-        occupied,
-        n: [dims.w, dims.h, dims.d],
-        k: grid.voxels_per_cell(),
-    })
-}
-
 /// The render op: interleaved copies of the volumes (validated), rays and options.
 struct CompositeOp<T> {
     volumes: Vec<Vec<[T; 4]>>,
     dims: GridDims,
     channels: usize,
     rays: Vec<Rays>,
-    occupancy: Vec<Occupancy>,
+    occupancy: Vec<CellDistances>,
     /// Per volume when skipping: is the 2x2x2 corner block with this lower corner all empty?
     empty_blocks: Vec<Vec<bool>>,
     grid: GridSpec<T>,
@@ -232,7 +204,7 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
         dims: GridDims,
         rays: &[Rays],
         cfg: &RenderConfig,
-        occupancy: Vec<Occupancy>,
+        occupancy: Vec<CellDistances>,
     ) -> Result<Self> {
         let channels = volumes.dim(1)?;
         let planar = volumes.contiguous()?;
@@ -280,7 +252,7 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
                 n: self.grid.n,
             },
             occupancy: self.occupancy.get(b).map(|o| OccView {
-                occupied: &o.occupied,
+                distance: &o.distance,
                 empty_block: &self.empty_blocks[b],
                 n: o.n,
                 k: o.k,
@@ -370,30 +342,6 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
         }
         out
     }
-}
-
-/// Flags each voxel whose trilinear corner block (itself and its +1 neighbours along each axis,
-/// clamped at the far faces exactly as the sampler clamps) holds density exactly 0 everywhere: a
-/// sample whose lower corner is such a voxel has density exactly 0.
-fn empty_blocks<T: Real>(data: &[[T; 4]], dims: GridDims) -> Vec<bool> {
-    (0..dims.voxel_count())
-        .into_par_iter()
-        .map(|i| {
-            let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
-            let (z1, y1, x1) = (
-                (z + 1).min(dims.d - 1),
-                (y + 1).min(dims.h - 1),
-                (x + 1).min(dims.w - 1),
-            );
-            [z, z1].iter().all(|&a| {
-                [y, y1].iter().all(|&b| {
-                    [x, x1]
-                        .iter()
-                        .all(|&c| data[dims.index(a, b, c)][0] == T::zero())
-                })
-            })
-        })
-        .collect()
 }
 
 /// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`

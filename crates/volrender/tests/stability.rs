@@ -155,16 +155,16 @@ fn bad_arguments_are_rejected() {
     // per-voxel count (2x2x2 grid: the diagonal crosses sqrt(12) voxel edges).
     let too_many = volrender::MAX_SAMPLES_PER_RAY + 1;
     let message = |cfg: RenderConfig| render(&vol, &rays, &cfg).unwrap_err().to_string();
-    assert!(message(
-        RenderConfig::default().with_sampler(Sampler::Uniform { samples: too_many })
-    )
-    .contains("sampler"));
-    assert!(message(
-        RenderConfig::default().with_sampler(Sampler::PerVoxel {
+    assert!(
+        message(RenderConfig::default().with_sampler(Sampler::Uniform { samples: too_many }))
+            .contains("sampler")
+    );
+    assert!(
+        message(RenderConfig::default().with_sampler(Sampler::PerVoxel {
             per_voxel: too_many / 3
-        })
-    )
-    .contains("samples per ray on this grid"));
+        }))
+        .contains("samples per ray on this grid")
+    );
     assert!(bad(RenderConfig::default().with_epsilon(1.5)));
     assert!(bad(RenderConfig::default().with_background([
         f32::NAN,

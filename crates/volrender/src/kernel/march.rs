@@ -94,7 +94,9 @@ pub(crate) fn setup_ray<T: Real>(
 /// empty cell has density exactly 0 everywhere inside it and up to half a voxel beyond.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct OccView<'a> {
-    pub(crate) occupied: &'a [bool],
+    /// Per cell: the chessboard distance in cells to the nearest occupied cell (0: occupied).
+    /// At distance `d`, the cube of cells within `d - 1` of it is all empty.
+    pub(crate) distance: &'a [u8],
     /// Per voxel: the trilinear corner block with this lower corner has density exactly 0 (a
     /// finer, exact test for samples inside occupied cells).
     pub(crate) empty_block: &'a [bool],
@@ -124,6 +126,8 @@ struct CellWalk<'a, T> {
     inv_b: [T; 3],
     /// 1 where the ray leaves a cell through its upper face, 0 through its lower one.
     side: [T; 3],
+    /// +1 or -1: the direction the ray crosses cells in.
+    sign: [T; 3],
     inv_dt: T,
 }
 
@@ -136,20 +140,25 @@ impl<'a, T: Real> CellWalk<'a, T> {
             inv_cell: T::one() / cell,
             last: occ.n.map(|n| T::of((n - 1) as f64)),
             inv_b: g.b.map(|b| T::one() / b),
-            side: g.b.map(|b| if b > T::zero() { T::one() } else { T::zero() }),
+            side: g
+                .b
+                .map(|b| if b > T::zero() { T::one() } else { T::zero() }),
+            sign: g
+                .b
+                .map(|b| if b > T::zero() { T::one() } else { -T::one() }),
             inv_dt: T::one() / g.dt,
         }
     }
 
     /// Classifies the cell of sample `i` (at index point `u`) and finds where the ray leaves
-    /// it. Samples before the exit are in the same cell up to rounding far below the half-voxel
-    /// margin (as are samples that rounding puts in a neighbouring cell), so skipping them when
-    /// it is empty is exact, and not re-checking them when it is occupied is merely
-    /// conservative.
+    /// it or, when it is empty, the cube of empty cells around it. Samples before the exit are
+    /// in that cell or cube up to rounding far below the half-voxel margin (as are samples that
+    /// rounding puts in a neighbouring cell), so skipping them when it is empty is exact, and
+    /// not re-checking them when it is occupied is merely conservative.
     #[inline(always)]
     fn classify(&self, g: &RayGeom<T>, u: [T; 3], i: usize) -> Cell<T> {
         let half = T::of(0.5);
-        let mut t_exit = T::infinity();
+        let mut cell = [0; 3];
         let mut flat = 0;
         let mut stride = 1;
         for a in 0..3 {
@@ -158,16 +167,22 @@ impl<'a, T: Real> CellWalk<'a, T> {
             let c = if c > T::zero() { c } else { T::zero() };
             let c = if c < self.last[a] { c } else { self.last[a] };
             // Truncation of a value >= 0 is floor.
-            let index = c.truncate_index();
-            flat += index as usize * stride;
+            cell[a] = c.truncate_index();
+            flat += cell[a] as usize * stride;
             stride *= self.occ.n[a];
+        }
+        let distance = self.occ.distance[flat];
+        // Cells within `reach` of this one (along every axis) are empty too.
+        let reach = T::of_index(u32::from(distance.max(1) - 1));
+        let mut t_exit = T::infinity();
+        for a in 0..3 {
             if g.b[a] != T::zero() {
-                let bound = (T::of_index(index) + self.side[a]) * self.cell - half;
-                let t = (bound - g.a[a]) * self.inv_b[a];
+                let face = T::of_index(cell[a]) + self.side[a] + reach * self.sign[a];
+                let t = (face * self.cell - half - g.a[a]) * self.inv_b[a];
                 t_exit = if t < t_exit { t } else { t_exit };
             }
         }
-        if self.occ.occupied[flat] {
+        if distance == 0 {
             return Cell::Occupied { until: t_exit };
         }
         // The first sample index at or past the exit, clamped to [0, n] before converting.
@@ -276,11 +291,11 @@ mod tests {
     #[test]
     fn skipping_visits_exactly_the_occupied_samples() {
         // 4 voxels per axis, 2 per cell: 2x2x2 cells, only cell (x=1, y=0, z=0) occupied.
-        let mut occupied = vec![false; 8];
-        occupied[1] = true;
+        let mut distance = vec![1; 8];
+        distance[1] = 0;
         let blocks = vec![false; 64];
         let occ = OccView {
-            occupied: &occupied,
+            distance: &distance,
             empty_block: &blocks,
             n: [2, 2, 2],
             k: 2,

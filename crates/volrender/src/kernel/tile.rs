@@ -164,10 +164,10 @@ mod tests {
                 [density, (i % 5) as f32 * 0.2, (i % 7) as f32 / 7.0, 0.5]
             })
             .collect();
-        let occupied = vec![true; 8];
+        let distance = vec![0; 8];
         let empty_block: Vec<bool> = (0..voxels).map(|i| i % 11 == 0).collect();
         let occ = OccView {
-            occupied: &occupied,
+            distance: &distance,
             empty_block: &empty_block,
             n: [2, 2, 2],
             k: 3,
