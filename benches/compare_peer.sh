@@ -2,13 +2,16 @@
 # Runs the PyTorch peer renderer and volrender back to back on the same machine, so their
 # throughputs can be compared as ratios (docs/performance-volrender.md).
 # Needs the peer's venv: bash ../shared/peer/setup.sh
+# Both sides tune glibc's malloc by default (the peer's `tune_malloc`); NO_MALLOPT=1 runs both
+# with glibc's defaults instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 P=${PEER_PYTHON:-/tmp/peer/venv/bin/python}
 PEER_DIR=${PEER_DIR:-../shared/peer}
 cargo build --release --example render_throughput
 R=./target/release/examples/render_throughput
-ARGS=(--grid 64 --rays 65536 --samples 128 --threads 2 --backward --repeats 3 --warmup 1)
+ARGS=(--grid 64 --rays 65536 --samples 128 --threads 2 --backward --repeats 5 --warmup 1)
+if [ "${NO_MALLOPT:-0}" = 1 ]; then ARGS+=(--no-mallopt); fi
 for scene in dense sparse; do
   echo "== $scene"; uptime
   (cd "$PEER_DIR" && "$P" torch_render.py "${ARGS[@]}" --scene "$scene")

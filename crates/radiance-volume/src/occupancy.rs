@@ -9,10 +9,11 @@
 //! `tau > 0`, density inside an empty cell is at most `tau` (a trilinear blend never exceeds its
 //! corners), an approximation whose bound is stated.
 //!
-//! Memory is one bit per cell; building is one pass over the density voxels that marks at most
-//! 27 cells per voxel above the threshold.
+//! Memory is one bool per cell; building is one pass over the density voxels that marks at most
+//! 27 cells per voxel above the threshold, in parallel over slabs of cells.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::grid::{Aabb, GridDims};
@@ -64,26 +65,36 @@ impl OccupancyGrid {
         let mut occupied = vec![false; dims.voxel_count()];
         volume.with_values(|values| {
             let sigma = &values[..vd.voxel_count()];
-            for z in 0..vd.d {
-                let cz = cells_of_voxel(z, k, dims.d);
-                for y in 0..vd.h {
-                    let cy = cells_of_voxel(y, k, dims.h);
-                    let row = &sigma[vd.index(z, y, 0)..vd.index(z, y, 0) + vd.w];
-                    for (x, &s) in row.iter().enumerate() {
-                        // NaN counts as occupied: unknown density is never skipped.
-                        if s > threshold || s.is_nan() {
-                            let cx = cells_of_voxel(x, k, dims.w);
-                            for &a in cz.iter().flatten() {
-                                for &b in cy.iter().flatten() {
-                                    for &c in cx.iter().flatten() {
-                                        occupied[dims.index(a, b, c)] = true;
+            // In parallel over slabs of cells with the same z: each reads the voxel slices whose
+            // footprint reaches it (its own and one more on each side) and marks only its cells.
+            let slab = dims.h * dims.w;
+            occupied
+                .par_chunks_mut(slab)
+                .enumerate()
+                .for_each(|(slab_z, cells)| {
+                    let first = (slab_z * k).saturating_sub(1);
+                    let last = ((slab_z + 1) * k).min(vd.d - 1);
+                    for z in first..=last {
+                        if !cells_of_voxel(z, k, dims.d).contains(&Some(slab_z)) {
+                            continue;
+                        }
+                        for y in 0..vd.h {
+                            let cy = cells_of_voxel(y, k, dims.h);
+                            let row = &sigma[vd.index(z, y, 0)..vd.index(z, y, 0) + vd.w];
+                            for (x, &s) in row.iter().enumerate() {
+                                // NaN counts as occupied: unknown density is never skipped.
+                                if s > threshold || s.is_nan() {
+                                    let cx = cells_of_voxel(x, k, dims.w);
+                                    for &b in cy.iter().flatten() {
+                                        for &c in cx.iter().flatten() {
+                                            cells[b * dims.w + c] = true;
+                                        }
                                     }
                                 }
                             }
                         }
                     }
-                }
-            }
+                });
         })?;
         let grid = volume.grid();
         Ok(Self {

@@ -50,6 +50,36 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+    /// A cell is occupied exactly when a voxel of its footprint (its voxels and one more on each
+    /// side, clipped to the grid) holds density.
+    #[test]
+    fn cells_are_occupied_exactly_when_their_footprint_holds_density(
+        d in 1usize..14, h in 1usize..14, w in 1usize..14,
+        k in 1usize..6,
+        occupied in proptest::collection::vec((0usize..14, 0usize..14, 0usize..14, 1e-6f32..5.0), 0..6),
+    ) {
+        let dims = GridDims::new(d, h, w);
+        let v = sparse_volume(dims, &occupied);
+        let occ = OccupancyGrid::build(&v, k, 0.0).unwrap();
+        let dense: Vec<(usize, usize, usize)> =
+            occupied.iter().map(|&(z, y, x, _)| (z % d, y % h, x % w)).collect();
+        let reaches = |voxel: usize, cell: usize| voxel + 1 >= cell * k && voxel <= (cell + 1) * k;
+        let cells = occ.dims();
+        for cz in 0..cells.d {
+            for cy in 0..cells.h {
+                for cx in 0..cells.w {
+                    let expected = dense
+                        .iter()
+                        .any(|&(z, y, x)| reaches(z, cz) && reaches(y, cy) && reaches(x, cx));
+                    prop_assert_eq!(occ.is_occupied(cz, cy, cx), expected, "cell ({}, {}, {})", cz, cy, cx);
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn empty_volume_has_no_occupied_cells_and_full_volume_all() {
     let empty = sparse_volume(GridDims::cube(16), &[]);

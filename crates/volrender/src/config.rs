@@ -75,7 +75,8 @@ pub struct RenderConfig {
     /// t_exit` in depth.
     pub epsilon: f32,
     /// Skip samples in cells of an occupancy grid (radiance-volume's, threshold 0) that hold no
-    /// density. The forward pass is exactly unchanged; the backward then omits the terms of
+    /// density; a ray leaps over the whole cube of empty cells around it at once, using each
+    /// cell's distance to the nearest occupied one. The forward pass is exactly unchanged; the backward then omits the terms of
     /// skipped samples, which only touch voxels of density 0: the density gradient of empty
     /// voxels loses those terms (it is no longer the full gradient), while colour gradients and
     /// the density gradient of voxels with density > 0 are exactly unchanged. Leave it off when

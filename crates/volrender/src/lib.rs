@@ -13,6 +13,12 @@
 //! - [`render_image`] and [`Image`] with PNG and EXR writers, for the CLI.
 //! - [`scenes`]: the peer benchmark's dense and sparse scenes and camera.
 //!
+//! Speed: the kernel evaluates 8 samples of a ray at a time (corners and `exp` in SIMD),
+//! composites them in order, and with skipping leaps over empty space. On a 2-core VM, forward
+//! plus backward of 65,536 rays x 128 samples on 64^3 took 0.16 s on a dense scene and 0.053 s
+//! on a sparse one with skipping: 3.8x and 11.2x faster than a PyTorch `grid_sample` renderer
+//! timed in the same run (`docs/performance-volrender.md` in the repository).
+//!
 //! # Conventions (shared by every volgen crate)
 //! - World space is right-handed and Z-up; the default volume box is `[-1, 1]^3`.
 //! - A volume tensor is `(C, D, H, W)` (batched `(N, C, D, H, W)`), D along z, H along y, W
@@ -44,11 +50,11 @@
 // `unsafe` only to call the AVX2+FMA build of the kernels after detecting both (kernel/tile.rs).
 #![deny(unsafe_code)]
 
+mod buffer_pool;
 mod camera;
 mod config;
 mod empty_space;
 mod error;
-mod grad_pool;
 mod image;
 mod kernel;
 mod op;
@@ -57,10 +63,10 @@ pub mod reference;
 pub mod scenes;
 mod transforms;
 
+pub use buffer_pool::release_gradient_buffers;
 pub use camera::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 pub use config::{Outputs, RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
 pub use error::{Error, Result};
-pub use grad_pool::release_gradient_buffers;
 pub use image::{render_image, Image};
 pub use op::{render, render_batch, RenderOutput};
 pub use rays::Rays;

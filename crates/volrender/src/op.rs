@@ -17,10 +17,10 @@ use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor, WithDType
 use radiance_volume::GridDims;
 use rayon::prelude::*;
 
+use crate::buffer_pool::{self, Pooled};
 use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
 use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
-use crate::grad_pool::{self, Pooled};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
 use crate::rays::Rays;
 /// The most gradient buffers the backward allocates per volume.
@@ -184,7 +184,7 @@ pub fn render_batch(
 }
 
 /// The render op: interleaved copies of the volumes (validated), rays and options.
-struct CompositeOp<T> {
+struct CompositeOp<T: Pooled> {
     volumes: Vec<Vec<[T; 4]>>,
     dims: GridDims,
     channels: usize,
@@ -220,11 +220,15 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
         let values = &T::cpu_storage_as_slice(cpu)?[start..end];
         let volumes = interleave(values, rays.len(), channels, dims)?;
-        let empty_blocks = if occupancy.is_empty() {
-            Vec::new()
-        } else {
-            volumes.iter().map(|v| empty_blocks(v, dims)).collect()
-        };
+        let voxels = dims.voxel_count();
+        let empty_blocks = occupancy
+            .iter()
+            .enumerate()
+            .map(|(b, cells)| {
+                let sigma = &values[b * channels * voxels..][..voxels];
+                empty_blocks(sigma, dims, cells)
+            })
+            .collect();
         Ok(Self {
             volumes,
             empty_blocks,
@@ -297,7 +301,7 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             let buffers: Vec<Vec<[T; 4]>> = (0..blocks)
                 .into_par_iter()
                 .map(|block| {
-                    let mut buf = grad_pool::take::<T>(voxels);
+                    let mut buf = buffer_pool::take_zeroed::<T>(voxels);
                     for tile in (block..tiles).step_by(blocks) {
                         let rays_in_tile = tile * TILE..((tile + 1) * TILE).min(rays.len());
                         let rows = (first_ray + rays_in_tile.start) * PACKED
@@ -338,38 +342,54 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
                         (s[j], r[j], g[j], bl[j]) = (acc[0], acc[1], acc[2], acc[3]);
                     }
                 });
-            grad_pool::give_back(buffers, BLOCKS);
+            buffer_pool::give_back(buffers);
         }
         out
     }
 }
 
+impl<T: Pooled> Drop for CompositeOp<T> {
+    /// Hands the volume copies to the buffer pool for the next render.
+    fn drop(&mut self) {
+        buffer_pool::give_back(std::mem::take(&mut self.volumes));
+    }
+}
+
 /// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`
-/// per voxel, checking that every value is finite and every density >= 0.
-fn interleave<T: Real>(
+/// per voxel, checking in the same pass that every value is finite and every density >= 0.
+fn interleave<T: Pooled>(
     values: &[T],
     n: usize,
     channels: usize,
     dims: GridDims,
 ) -> Result<Vec<Vec<[T; 4]>>> {
+    /// Voxels per parallel task.
+    const CHUNK: usize = 4096;
     let voxels = dims.voxel_count();
+    let bad = |v: &[T; 4]| !v.iter().all(|x| x.is_finite()) || v[0] < T::zero();
     (0..n)
         .map(|b| {
             let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
-            let data: Vec<[T; 4]> = (0..voxels)
-                .into_par_iter()
-                .map(|i| {
-                    [
-                        vol[i],
-                        vol[voxels + i],
-                        vol[2 * voxels + i],
-                        vol[3 * voxels + i],
-                    ]
+            let mut data = buffer_pool::take::<T>(voxels);
+            let count: usize = data
+                .par_chunks_mut(CHUNK)
+                .enumerate()
+                .map(|(chunk, out)| {
+                    let start = chunk * CHUNK;
+                    let planes = [0, 1, 2, 3].map(|c| {
+                        let plane = c * voxels + start;
+                        &vol[plane..plane + out.len()]
+                    });
+                    let mut count = 0;
+                    for (i, cell) in out.iter_mut().enumerate() {
+                        *cell = planes.map(|p| p[i]);
+                        count += usize::from(bad(cell));
+                    }
+                    count
                 })
-                .collect();
-            let bad = |v: &[T; 4]| !v.iter().all(|x| x.is_finite()) || v[0] < T::zero();
-            let count = data.par_iter().filter(|v| bad(v)).count();
+                .sum();
             if count > 0 {
+                // (The buffer is not given back: errors are not the path to optimise.)
                 let i = data.iter().position(bad).unwrap_or(0);
                 let c = (0..4).find(|&c| !data[i][c].is_finite()).unwrap_or(0);
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
