@@ -29,7 +29,12 @@ pub(crate) fn exp_nonpositive(x: f32) -> f32 {
     // over several samples vectorise. (NaN stays NaN: both comparisons are false.)
     let flush = x < SMALLEST_NORMAL_LN;
     let x = if flush { SMALLEST_NORMAL_LN } else { x };
-    let n = (x * std::f32::consts::LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
+    // Adding the magic number rounds to an integer n, which then sits in the low mantissa bits:
+    // n as an integer is a bit-pattern difference, with no float-to-int conversion (those
+    // keep LLVM from vectorising the loop).
+    let shifted = x * std::f32::consts::LOG2_E + ROUND_MAGIC;
+    let n = shifted - ROUND_MAGIC;
+    let n_int = shifted.to_bits() as i32 - ROUND_MAGIC.to_bits() as i32;
     let r = (x - n * LN2_HI) - n * LN2_LO;
     // e^r = sum r^k / k!, by Estrin's scheme: independent pairs joined by r^2 and r^4, so the
     // dependency chain is 4 multiply-adds deep instead of Horner's 8 (the kernel's loop waits on
@@ -42,12 +47,14 @@ pub(crate) fn exp_nonpositive(x: f32) -> f32 {
     let p67 = 1.0 / 720.0 + r * (1.0 / 5040.0);
     let p = (p01 + r2 * p23) + r4 * (p45 + r2 * p67);
     // n is in [-126, 0] here, so 127 + n is a valid biased exponent of a normal f32.
-    let scale = f32::from_bits(((127 + n as i32) as u32) << 23);
-    if flush {
-        0.0
+    // The flush selects a scale of 0 rather than the result, a cheap choice LLVM keeps as a
+    // select instead of branching around the polynomial.
+    let scale_bits = if flush {
+        0
     } else {
-        p * scale
-    }
+        ((127 + n_int) as u32) << 23
+    };
+    p * f32::from_bits(scale_bits)
 }
 
 #[cfg(test)]

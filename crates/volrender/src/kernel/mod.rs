@@ -36,6 +36,12 @@ pub(crate) trait Real: Float + Send + Sync + std::fmt::Debug + Default + 'static
     /// (through `i32`) instead of the range-checked float-to-integer sequence.
     fn truncate_index(self) -> u32;
 
+    /// Splits a value known to be in `[0, 2^22)` into its floor, as a float and as an index,
+    /// without a float-to-int conversion instruction: adding `1.5 * 2^mantissa_bits` rounds
+    /// to an integer that then sits in the low mantissa bits, and the floor is that integer or
+    /// one less. (Conversions keep LLVM from vectorising the kernels' loops over samples.)
+    fn floor_split(self) -> (Self, u32);
+
     /// Converts an index below `2^31` exactly (below `2^24` for f32): one conversion
     /// instruction (through `i32`), where `of(i as f64)` takes two.
     fn of_index(i: u32) -> Self;
@@ -55,6 +61,17 @@ impl Real for f32 {
     #[inline(always)]
     fn truncate_index(self) -> u32 {
         self as i32 as u32
+    }
+
+    #[inline(always)]
+    fn floor_split(self) -> (Self, u32) {
+        const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23
+        let shifted = self + MAGIC;
+        let nearest = shifted - MAGIC;
+        let rounded_up = nearest > self;
+        let index = shifted.to_bits() - MAGIC.to_bits() - u32::from(rounded_up);
+        let floor = if rounded_up { nearest - 1.0 } else { nearest };
+        (floor, index)
     }
 
     #[inline(always)]
@@ -80,6 +97,17 @@ impl Real for f64 {
     }
 
     #[inline(always)]
+    fn floor_split(self) -> (Self, u32) {
+        const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 * 2^52
+        let shifted = self + MAGIC;
+        let nearest = shifted - MAGIC;
+        let rounded_up = nearest > self;
+        let index = (shifted.to_bits() - MAGIC.to_bits()) as u32 - u32::from(rounded_up);
+        let floor = if rounded_up { nearest - 1.0 } else { nearest };
+        (floor, index)
+    }
+
+    #[inline(always)]
     fn of_index(i: u32) -> Self {
         i as i32 as f64
     }
@@ -91,4 +119,30 @@ impl Real for f64 {
 pub(crate) struct VolumeView<'a, T> {
     pub(crate) data: &'a [[T; 4]],
     pub(crate) n: [usize; 3],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_split_is_floor() {
+        let mut values: Vec<f64> = vec![0.0, 0.5, 1.0, 1.5, 2.5, 3.0 - 1e-7, 63.5, 4_194_303.75];
+        values.extend((0..2000).map(|i| i as f64 * 0.37));
+        for x in values {
+            let (f, i) = (x as f32).floor_split();
+            assert_eq!(
+                (f, i),
+                ((x as f32).floor(), (x as f32).floor() as u32),
+                "{x}"
+            );
+            let (f, i) = x.floor_split();
+            assert_eq!((f, i), (x.floor(), x.floor() as u32), "{x}");
+        }
+        // The largest f32 below 1 and below each of a few integers.
+        for k in [1u32, 2, 64, 1 << 21] {
+            let below = f32::from_bits((k as f32).to_bits() - 1);
+            assert_eq!(below.floor_split(), ((k - 1) as f32, k - 1));
+        }
+    }
 }
