@@ -59,9 +59,9 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
         let g = setup_ray(o, dir, &grid, cfg.sampler);
         dts.push(g.dt);
         for i in 0..m {
-            let t = g.t(i);
+            let t = g.t0 + (i as f64 + g.off) * g.dt;
             ts.push(t);
-            let u = g.point(t);
+            let u = [0, 1, 2].map(|k| g.a[k] + t * g.b[k]);
             // Rays that miss have dt = 0 (no attenuation); their corners are zeroed too.
             match corners(grid.n, u).filter(|_| g.n > 0) {
                 Some(c) => {

@@ -199,7 +199,7 @@ impl<T: Real> Chunk<T> {
 pub(crate) struct Chunks<'a, T> {
     vol: &'a VolumeView<'a, T>,
     occ: Option<&'a OccView<'a>>,
-    g: &'a RayGeom<T>,
+    dt: T,
     marcher: Marcher<'a, T>,
     chunk: Chunk<T>,
 }
@@ -214,7 +214,7 @@ impl<'a, T: Real> Chunks<'a, T> {
         Self {
             vol,
             occ,
-            g,
+            dt: g.dt,
             marcher: Marcher::new(g, occ),
             chunk: Chunk::new(),
         }
@@ -226,39 +226,21 @@ impl<'a, T: Real> Chunks<'a, T> {
         let c = &mut self.chunk;
         c.len = 0;
         while c.len < LANES {
-            let Some(run) = self.marcher.next_run(LANES - c.len) else {
+            let Some((t, u)) = self.marcher.next_sample() else {
                 break;
             };
-            if run.len() == LANES {
-                // A whole chunk in one run (the common case without skipping): fixed-size loops
-                // that vectorise.
-                for l in 0..LANES {
-                    c.t[l] = self.g.t(run.start + l);
-                }
-                for a in 0..3 {
-                    for l in 0..LANES {
-                        c.u[a][l] = self.g.a[a] + c.t[l] * self.g.b[a];
-                    }
-                }
-                c.len = LANES;
-            } else {
-                for i in run {
-                    let t = self.g.t(i);
-                    c.t[c.len] = t;
-                    let u = self.g.point(t);
-                    for a in 0..3 {
-                        c.u[a][c.len] = u[a];
-                    }
-                    c.len += 1;
-                }
+            c.t[c.len] = t;
+            for a in 0..3 {
+                c.u[a][c.len] = u[a];
             }
+            c.len += 1;
         }
         if c.len == 0 {
             return None;
         }
         c.locate(self.vol.n);
         c.gather(self.vol, self.occ);
-        c.attenuate(self.g.dt);
+        c.attenuate(self.dt);
         Some(&self.chunk)
     }
 }

@@ -200,7 +200,7 @@ impl<'a, T: Real> CellWalk<'a, T> {
     }
 }
 
-/// The samples of one ray in order, as runs of consecutive sample indices, passing over
+/// The samples of one ray in order, as `(t, u)` (distance and index-space point), passing over
 /// samples in empty cells when an occupancy grid is given.
 ///
 /// A cursor with an inlined `next` rather than a closure-taking loop: the per-sample code must
@@ -224,51 +224,33 @@ impl<'a, T: Real> Marcher<'a, T> {
         }
     }
 
-    /// Returns the next run of at most `max` (>= 1) consecutive samples to evaluate, or `None`
-    /// past the last one. Without an occupancy grid that is simply the next `max` samples.
+    /// Returns the next sample to evaluate, or `None` past the last one.
     #[inline(always)]
-    pub(crate) fn next_run(&mut self, max: usize) -> Option<std::ops::Range<usize>> {
+    pub(crate) fn next_sample(&mut self) -> Option<(T, [T; 3])> {
         let g = self.g;
-        let Some(walk) = &self.walk else {
-            let start = self.i;
-            self.i = (start + max).min(g.n);
-            return (start < g.n).then_some(start..self.i);
-        };
         while self.i < g.n {
             let i = self.i;
-            let t = g.t(i);
-            if t >= self.checked_until {
-                match walk.classify(g, g.point(t), i) {
-                    Cell::Occupied { until } => self.checked_until = until,
-                    Cell::Empty { next } => {
-                        self.i = next;
-                        continue;
+            let t = g.t0 + (T::of_index(i as u32) + g.off) * g.dt;
+            let u = [
+                g.a[0] + t * g.b[0],
+                g.a[1] + t * g.b[1],
+                g.a[2] + t * g.b[2],
+            ];
+            if let Some(walk) = &self.walk {
+                if t >= self.checked_until {
+                    match walk.classify(g, u, i) {
+                        Cell::Occupied { until } => self.checked_until = until,
+                        Cell::Empty { next } => {
+                            self.i = next;
+                            continue;
+                        }
                     }
                 }
             }
-            // The samples before the checked cell's exit follow without another lookup.
-            let mut end = i + 1;
-            while end < g.n && end - i < max && g.t(end) < self.checked_until {
-                end += 1;
-            }
-            self.i = end;
-            return Some(i..end);
+            self.i = i + 1;
+            return Some((t, u));
         }
         None
-    }
-}
-
-impl<T: Real> RayGeom<T> {
-    /// The distance of sample `i` along the ray.
-    #[inline(always)]
-    pub(crate) fn t(&self, i: usize) -> T {
-        self.t0 + (T::of_index(i as u32) + self.off) * self.dt
-    }
-
-    /// The index-space point at distance `t`.
-    #[inline(always)]
-    pub(crate) fn point(&self, t: T) -> [T; 3] {
-        [0, 1, 2].map(|a| self.a[a] + t * self.b[a])
     }
 }
 
@@ -324,20 +306,12 @@ mod tests {
             &CUBE,
             Sampler::Uniform { samples: 40 },
         );
-        let collect = |occ: Option<&OccView<'_>>, max: usize| {
+        let collect = |occ: Option<&OccView<'_>>| {
             let mut marcher = Marcher::new(&g, occ);
-            std::iter::from_fn(|| marcher.next_run(max))
-                .flatten()
-                .map(|i| g.t(i))
-                .collect::<Vec<f64>>()
+            std::iter::from_fn(|| marcher.next_sample().map(|(t, _)| t)).collect::<Vec<f64>>()
         };
-        let all = collect(None, 40);
-        assert_eq!(all.len(), 40);
+        let (all, kept) = (collect(None), collect(Some(&occ)));
         let expected: Vec<f64> = all.iter().copied().filter(|&t| t - 3.0 >= 0.0).collect();
-        // Whatever the run length, the same samples in the same order.
-        for max in [1, 3, 8, 40] {
-            assert_eq!(collect(None, max), all);
-            assert_eq!(collect(Some(&occ), max), expected);
-        }
+        assert_eq!(kept, expected);
     }
 }
