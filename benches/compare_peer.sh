@@ -12,9 +12,11 @@ cargo build --release --example render_throughput
 R=./target/release/examples/render_throughput
 ARGS=(--grid 64 --rays 65536 --samples 128 --threads 2 --backward --repeats 5 --warmup 1)
 if [ "${NO_MALLOPT:-0}" = 1 ]; then ARGS+=(--no-mallopt); fi
+# A pause before each run: a process that just exited can still be returning its memory to
+# the system, which slowed the first runs of the next one by up to 40%.
 for scene in dense sparse; do
   echo "== $scene"; uptime
-  (cd "$PEER_DIR" && "$P" torch_render.py "${ARGS[@]}" --scene "$scene")
-  "$R" "${ARGS[@]}" --scene "$scene"
-  "$R" "${ARGS[@]}" --scene "$scene" --skip-empty
+  sleep 3; (cd "$PEER_DIR" && "$P" torch_render.py "${ARGS[@]}" --scene "$scene")
+  sleep 3; "$R" "${ARGS[@]}" --scene "$scene"
+  sleep 3; "$R" "${ARGS[@]}" --scene "$scene" --skip-empty
 done

@@ -15,16 +15,26 @@ fn sparse_volume(dims: GridDims, occupied: &[(usize, usize, usize, f32)]) -> Rad
     RadianceVolume::new(t, Aabb::CUBE).unwrap()
 }
 
+prop_compose! {
+    /// A small grid with density at up to 5 voxels (coordinates wrap around the grid), and a
+    /// cell size.
+    fn sparse_case()(
+        d in 1usize..14, h in 1usize..14, w in 1usize..14,
+        k in 1usize..6,
+        occupied in proptest::collection::vec((0usize..14, 0usize..14, 0usize..14, 1e-6f32..5.0), 0..6),
+    ) -> (GridDims, Vec<(usize, usize, usize, f32)>, usize) {
+        (GridDims::new(d, h, w), occupied, k)
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
     #[test]
     fn no_sample_with_density_lies_in_an_empty_cell(
-        d in 1usize..14, h in 1usize..14, w in 1usize..14,
-        k in 1usize..6,
-        occupied in proptest::collection::vec((0usize..14, 0usize..14, 0usize..14, 1e-6f32..5.0), 0..6),
+        (dims, occupied, k) in sparse_case(),
         probes in proptest::collection::vec((-1.0f32..=1.0, -1.0f32..=1.0, -1.0f32..=1.0), 200),
     ) {
-        let dims = GridDims::new(d, h, w);
+        let (d, h, w) = (dims.d, dims.h, dims.w);
         let v = sparse_volume(dims, &occupied);
         let occ = OccupancyGrid::build(&v, k, 0.0).unwrap();
         prop_assert_eq!(occ.dims(), GridDims::new(d.div_ceil(k), h.div_ceil(k), w.div_ceil(k)));
@@ -55,12 +65,8 @@ proptest! {
     /// A cell is occupied exactly when a voxel of its footprint (its voxels and one more on each
     /// side, clipped to the grid) holds density.
     #[test]
-    fn cells_are_occupied_exactly_when_their_footprint_holds_density(
-        d in 1usize..14, h in 1usize..14, w in 1usize..14,
-        k in 1usize..6,
-        occupied in proptest::collection::vec((0usize..14, 0usize..14, 0usize..14, 1e-6f32..5.0), 0..6),
-    ) {
-        let dims = GridDims::new(d, h, w);
+    fn cells_are_occupied_exactly_when_their_footprint_holds_density((dims, occupied, k) in sparse_case()) {
+        let (d, h, w) = (dims.d, dims.h, dims.w);
         let v = sparse_volume(dims, &occupied);
         let occ = OccupancyGrid::build(&v, k, 0.0).unwrap();
         let dense: Vec<(usize, usize, usize)> =

@@ -45,7 +45,7 @@ fn lock<T>(pool: &'static Pool<T>) -> MutexGuard<'static, Vec<Vec<[T; 4]>>> {
 }
 
 /// The most buffers kept per float type: the backward's gradient blocks and one volume copy.
-pub(crate) const KEEP: usize = 5;
+pub(crate) const KEEP: usize = crate::op::BLOCKS + 1;
 
 /// Returns a buffer of `voxels` elements with unspecified (old) contents, for a caller that
 /// overwrites all of it: a pooled one, or a new one.

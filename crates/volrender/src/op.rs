@@ -24,7 +24,7 @@ use crate::error::{invalid, Error, Result};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
 use crate::rays::Rays;
 /// The most gradient buffers the backward allocates per volume.
-const BLOCKS: usize = 4;
+pub(crate) const BLOCKS: usize = 4;
 /// Consecutive rays per tile: the unit of parallel work, forward and backward (where tiles are
 /// dealt round-robin to the blocks).
 const TILE: usize = 64;

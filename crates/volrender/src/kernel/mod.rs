@@ -47,6 +47,34 @@ pub(crate) trait Real: Float + Send + Sync + std::fmt::Debug + Default + 'static
     fn of_index(i: u32) -> Self;
 }
 
+/// The index conversions, the same code for both float types up to the magic number
+/// `1.5 * 2^mantissa_bits` of `floor_split`.
+macro_rules! index_conversions {
+    ($float:ty, $magic:expr) => {
+        #[inline(always)]
+        fn truncate_index(self) -> u32 {
+            self as i32 as u32
+        }
+
+        #[inline(always)]
+        fn floor_split(self) -> (Self, u32) {
+            const MAGIC: $float = $magic;
+            let shifted = self + MAGIC;
+            let nearest = shifted - MAGIC;
+            let rounded_up = nearest > self;
+            // The integer sits in the low bits, which fit in 32 for values below 2^22.
+            let index = (shifted.to_bits() - MAGIC.to_bits()) as u32 - u32::from(rounded_up);
+            let floor = if rounded_up { nearest - 1.0 } else { nearest };
+            (floor, index)
+        }
+
+        #[inline(always)]
+        fn of_index(i: u32) -> Self {
+            i as i32 as $float
+        }
+    };
+}
+
 impl Real for f32 {
     #[inline]
     fn of(x: f64) -> Self {
@@ -58,26 +86,7 @@ impl Real for f32 {
         exp::exp_nonpositive(self)
     }
 
-    #[inline(always)]
-    fn truncate_index(self) -> u32 {
-        self as i32 as u32
-    }
-
-    #[inline(always)]
-    fn floor_split(self) -> (Self, u32) {
-        const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23
-        let shifted = self + MAGIC;
-        let nearest = shifted - MAGIC;
-        let rounded_up = nearest > self;
-        let index = shifted.to_bits() - MAGIC.to_bits() - u32::from(rounded_up);
-        let floor = if rounded_up { nearest - 1.0 } else { nearest };
-        (floor, index)
-    }
-
-    #[inline(always)]
-    fn of_index(i: u32) -> Self {
-        i as i32 as f32
-    }
+    index_conversions!(f32, 12_582_912.0); // 1.5 * 2^23
 }
 
 impl Real for f64 {
@@ -91,26 +100,7 @@ impl Real for f64 {
         self.exp()
     }
 
-    #[inline(always)]
-    fn truncate_index(self) -> u32 {
-        self as i32 as u32
-    }
-
-    #[inline(always)]
-    fn floor_split(self) -> (Self, u32) {
-        const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 * 2^52
-        let shifted = self + MAGIC;
-        let nearest = shifted - MAGIC;
-        let rounded_up = nearest > self;
-        let index = (shifted.to_bits() - MAGIC.to_bits()) as u32 - u32::from(rounded_up);
-        let floor = if rounded_up { nearest - 1.0 } else { nearest };
-        (floor, index)
-    }
-
-    #[inline(always)]
-    fn of_index(i: u32) -> Self {
-        i as i32 as f64
-    }
+    index_conversions!(f64, 6_755_399_441_055_744.0); // 1.5 * 2^52
 }
 
 /// A volume as the kernels see it: interleaved `[sigma, r, g, b]` per voxel, row-major
