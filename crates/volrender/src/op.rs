@@ -2,9 +2,9 @@
 //! volume as its only differentiable input, rays and options captured in the op) and the public
 //! [`render`] / [`render_batch`] wrappers.
 //!
-//! The op's output is a packed `(R, 6)` tensor `[r, g, b, depth, opacity, transmittance]` that
-//! the wrappers narrow, so gradients from every output flow through the one op; the last column
-//! (final transmittance) is kept for the backward and never exposed.
+//! The op's output is a packed `(R, 8)` tensor `[r, g, b, depth, opacity, transmittance, first
+//! live sample, end of live samples]` that the wrappers narrow, so gradients from every output
+//! flow through the one op; the last three columns are kept for the backward and never exposed.
 //!
 //! Determinism: the forward writes each ray's outputs independently. The backward splits the
 //! rays into at most [`BLOCKS`] blocks (tiles of [`TILE`] consecutive rays dealt round-robin, so
@@ -268,7 +268,7 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
         }
     }
 
-    /// Renders every ray of every volume into the packed `(R, 6)` layout.
+    /// Renders every ray of every volume into the packed `(R, PACKED)` layout.
     fn forward(&self) -> Vec<T> {
         let total: usize = self.rays.iter().map(Rays::len).sum();
         let mut out = vec![T::zero(); total * PACKED];

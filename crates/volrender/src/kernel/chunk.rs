@@ -23,6 +23,8 @@ pub(crate) const LANES: usize = 8;
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Chunk<T> {
     pub(crate) len: usize,
+    /// Sample index along the ray.
+    pub(crate) index: [usize; LANES],
     /// Distance along the ray.
     pub(crate) t: [T; LANES],
     /// Index-space position per axis (x, y, z).
@@ -96,6 +98,7 @@ impl<T: Real> Chunk<T> {
         let zeros = [T::zero(); LANES];
         Self {
             len: 0,
+            index: [0; LANES],
             t: zeros,
             u: [zeros; 3],
             live: [false; LANES],
@@ -205,17 +208,19 @@ pub(crate) struct Chunks<'a, T> {
 }
 
 impl<'a, T: Real> Chunks<'a, T> {
+    /// The chunks of samples `start..g.n`.
     #[inline(always)]
     pub(crate) fn new(
         vol: &'a VolumeView<'a, T>,
         occ: Option<&'a OccView<'a>>,
         g: &'a RayGeom<T>,
+        start: usize,
     ) -> Self {
         Self {
             vol,
             occ,
             dt: g.dt,
-            marcher: Marcher::new(g, occ),
+            marcher: Marcher::new(g, occ, start),
             chunk: Chunk::new(),
         }
     }
@@ -226,9 +231,10 @@ impl<'a, T: Real> Chunks<'a, T> {
         let c = &mut self.chunk;
         c.len = 0;
         while c.len < LANES {
-            let Some((t, u)) = self.marcher.next_sample() else {
+            let Some((i, t, u)) = self.marcher.next_sample() else {
                 break;
             };
+            c.index[c.len] = i;
             c.t[c.len] = t;
             for a in 0..3 {
                 c.u[a][c.len] = u[a];

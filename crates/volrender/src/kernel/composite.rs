@@ -29,13 +29,18 @@ pub(crate) struct Params<T> {
     pub(crate) opacity: bool,
 }
 
-/// One ray's outputs; `trans` is the final transmittance, kept for the backward.
+/// One ray's outputs, and what the backward keeps of the forward: the final transmittance and
+/// the span of samples that contributed.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct RayOut<T> {
     pub(crate) rgb: [T; 3],
     pub(crate) depth: T,
     pub(crate) opacity: T,
     pub(crate) trans: T,
+    /// Sample indices `live.0..live.1` hold every live sample the forward composited (empty
+    /// when there was none): samples outside add nothing to the forward or the backward, so
+    /// the backward walks only these.
+    pub(crate) live: (usize, usize),
 }
 
 /// Renders one ray.
@@ -49,12 +54,15 @@ pub(crate) fn forward_ray<T: Real>(
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
-    let mut chunks = Chunks::new(vol, occ, g);
+    let mut live: Option<(usize, usize)> = None;
+    let mut chunks = Chunks::new(vol, occ, g, 0);
     'ray: while let Some(c) = chunks.next_chunk() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
             }
+            let i = c.index[l];
+            live = Some((live.map_or(i, |(from, _)| from), i + 1));
             let w = trans * c.alpha[l];
             for ch in 0..3 {
                 rgb[ch] = rgb[ch] + w * c.value[l][ch + 1];
@@ -80,6 +88,7 @@ pub(crate) fn forward_ray<T: Real>(
         // Rounding can push the sum of weights a few ulp past 1.
         opacity: opacity.min(T::one()),
         trans,
+        live: live.unwrap_or((0, 0)),
     }
 }
 
@@ -100,7 +109,13 @@ pub(crate) fn backward_ray<T: Real>(
     let opacity_term = ga * out.trans;
     let mut upto = T::zero();
     let mut trans = T::one();
-    let mut chunks = Chunks::new(vol, occ, g);
+    let (from, to) = out.live;
+    if from >= to {
+        return;
+    }
+    // Stop the walk after the forward's last live sample.
+    let g = &RayGeom { n: to, ..*g };
+    let mut chunks = Chunks::new(vol, occ, g, from);
     'ray: while let Some(c) = chunks.next_chunk() {
         for l in 0..c.len {
             if !c.live[l] {
@@ -191,6 +206,7 @@ mod tests {
             depth: 0.0,
             opacity: 0.0,
             trans: 1.0,
+            live: (0, 0),
         };
         for n in 1..=full.n {
             let out = forward_ray(&vol, None, &RayGeom { n, ..full }, &p);

@@ -200,7 +200,7 @@ impl<'a, T: Real> CellWalk<'a, T> {
     }
 }
 
-/// The samples of one ray in order, as `(t, u)` (distance and index-space point), passing over
+/// The samples of one ray in order, as `(i, t, u)` (index, distance and index-space point), passing over
 /// samples in empty cells when an occupancy grid is given.
 ///
 /// A cursor with an inlined `next` rather than a closure-taking loop: the per-sample code must
@@ -214,19 +214,20 @@ pub(crate) struct Marcher<'a, T> {
 }
 
 impl<'a, T: Real> Marcher<'a, T> {
+    /// Walks the samples from index `start` on.
     #[inline(always)]
-    pub(crate) fn new(g: &'a RayGeom<T>, occ: Option<&'a OccView<'a>>) -> Self {
+    pub(crate) fn new(g: &'a RayGeom<T>, occ: Option<&'a OccView<'a>>, start: usize) -> Self {
         Self {
             g,
             walk: occ.filter(|_| g.n > 0).map(|o| CellWalk::new(o, g)),
-            i: 0,
+            i: start,
             checked_until: T::neg_infinity(),
         }
     }
 
-    /// Returns the next sample to evaluate, or `None` past the last one.
+    /// Returns the next sample to evaluate as `(index, t, u)`, or `None` past the last one.
     #[inline(always)]
-    pub(crate) fn next_sample(&mut self) -> Option<(T, [T; 3])> {
+    pub(crate) fn next_sample(&mut self) -> Option<(usize, T, [T; 3])> {
         let g = self.g;
         while self.i < g.n {
             let i = self.i;
@@ -248,7 +249,7 @@ impl<'a, T: Real> Marcher<'a, T> {
                 }
             }
             self.i = i + 1;
-            return Some((t, u));
+            return Some((i, t, u));
         }
         None
     }
@@ -307,8 +308,8 @@ mod tests {
             Sampler::Uniform { samples: 40 },
         );
         let collect = |occ: Option<&OccView<'_>>| {
-            let mut marcher = Marcher::new(&g, occ);
-            std::iter::from_fn(|| marcher.next_sample().map(|(t, _)| t)).collect::<Vec<f64>>()
+            let mut marcher = Marcher::new(&g, occ, 0);
+            std::iter::from_fn(|| marcher.next_sample().map(|(_, t, _)| t)).collect::<Vec<f64>>()
         };
         let (all, kept) = (collect(None), collect(Some(&occ)));
         let expected: Vec<f64> = all.iter().copied().filter(|&t| t - 3.0 >= 0.0).collect();

@@ -18,8 +18,10 @@ use super::march::{setup_ray, GridSpec, OccView};
 use super::{Real, VolumeView};
 use crate::config::Sampler;
 
-/// Columns of the packed per-ray output `[r, g, b, depth, opacity, transmittance]`.
-pub(crate) const PACKED: usize = 6;
+/// Columns of the packed per-ray output `[r, g, b, depth, opacity, transmittance, first live
+/// sample, one past the last live sample]` (sample indices are exact in either float type: a
+/// ray has at most 2^24 samples).
+pub(crate) const PACKED: usize = 8;
 
 /// The instruction set the kernels run with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -107,7 +109,17 @@ impl<T: Real> RayKernel<'_, T> {
         for ((&origin, &dir), o) in origins.iter().zip(dirs).zip(out.chunks_exact_mut(PACKED)) {
             let g = setup_ray(origin, dir, &self.grid, self.sampler);
             let r = forward_ray(&self.volume, self.occupancy.as_ref(), &g, &self.params);
-            o.copy_from_slice(&[r.rgb[0], r.rgb[1], r.rgb[2], r.depth, r.opacity, r.trans]);
+            let (from, to) = r.live;
+            o.copy_from_slice(&[
+                r.rgb[0],
+                r.rgb[1],
+                r.rgb[2],
+                r.depth,
+                r.opacity,
+                r.trans,
+                T::of_index(from as u32),
+                T::of_index(to as u32),
+            ]);
         }
     }
 
@@ -122,12 +134,20 @@ impl<T: Real> RayKernel<'_, T> {
     ) {
         let rows = res.chunks_exact(PACKED).zip(grad.chunks_exact(PACKED));
         for ((&origin, &dir), (p, gr)) in origins.iter().zip(dirs).zip(rows) {
+            let live = (
+                p[6].truncate_index() as usize,
+                p[7].truncate_index() as usize,
+            );
+            if live.0 >= live.1 {
+                continue; // nothing contributed, nothing to differentiate
+            }
             let g = setup_ray(origin, dir, &self.grid, self.sampler);
             let out = RayOut {
                 rgb: [p[0], p[1], p[2]],
                 depth: p[3],
                 opacity: p[4],
                 trans: p[5],
+                live,
             };
             let g_out = [gr[0], gr[1], gr[2], gr[3], gr[4]];
             backward_ray(
