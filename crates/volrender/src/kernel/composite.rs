@@ -141,7 +141,7 @@ mod tests {
     use super::*;
     use crate::config::Sampler;
     use crate::kernel::chunk::attenuation;
-    use crate::kernel::march::{setup_ray, GridSpec};
+    use crate::kernel::march::{setup_ray, GridSpec, OccView};
 
     #[test]
     fn attenuation_is_a_split_of_one() {
@@ -216,6 +216,73 @@ mod tests {
             );
             assert!(out.rgb.iter().all(|c| c.is_finite()) && (0.0..=1.0).contains(&out.opacity));
             last = out;
+        }
+    }
+
+    /// Walking only the forward's live span changes no gradient bit against walking the whole
+    /// ray, for rays that miss, graze, start inside or cross empty regions, with and without
+    /// an occupancy grid.
+    #[test]
+    fn the_live_span_holds_every_contribution() {
+        let n = [6, 5, 4];
+        let voxels = n[0] * n[1] * n[2];
+        // Density only in the middle of x, so rays start and end in empty space.
+        let data: Vec<[f32; 4]> = (0..voxels)
+            .map(|i| {
+                let x = i % n[0];
+                let density = if (2..4).contains(&x) {
+                    0.5 + (i % 7) as f32
+                } else {
+                    0.0
+                };
+                [density, (i % 3) as f32 * 0.3, 0.5, (i % 5) as f32 * 0.2]
+            })
+            .collect();
+        let vol = VolumeView { data: &data, n };
+        let grid = GridSpec {
+            min: [-1.0; 3],
+            max: [1.0; 3],
+            n,
+        };
+        let distance = vec![0u8; 8];
+        let empty_block: Vec<bool> = (0..voxels).map(|i| data[i][0] == 0.0).collect();
+        let occ = OccView {
+            distance: &distance,
+            empty_block: &empty_block,
+            n: [2, 2, 2],
+            k: 3,
+        };
+        let rays = [
+            ([-3.0, 0.1, 0.2], [1.0, 0.05, -0.02]),
+            ([-3.0, 2.5, 0.0], [1.0, 0.0, 0.0]),
+            ([0.2, -0.3, 0.1], [0.3, 1.0, 0.2]),
+            ([-3.0, -1.0, 1.0], [1.0, 0.0, 0.0]),
+            ([0.0, 0.0, 3.0], [0.1, 0.0, -1.0]),
+        ];
+        for occ in [None, Some(&occ)] {
+            for epsilon in [0.0f32, 0.05] {
+                let p = Params {
+                    epsilon,
+                    background: [0.2, 0.1, 0.0],
+                    depth: true,
+                    opacity: true,
+                };
+                for (origin, dir) in rays {
+                    let g = setup_ray(origin, dir, &grid, Sampler::Uniform { samples: 29 });
+                    let out = forward_ray(&vol, occ, &g, &p);
+                    let backward = |live| {
+                        let mut buf = vec![[0f32; 4]; voxels];
+                        let grad = [0.3, -1.0, 0.7, 0.25, -0.5];
+                        backward_ray(&vol, occ, &g, &p, &RayOut { live, ..out }, grad, &mut buf);
+                        buf.as_flattened()
+                            .iter()
+                            .map(|v| v.to_bits())
+                            .collect::<Vec<_>>()
+                    };
+                    assert!(out.live.1 <= g.n);
+                    assert_eq!(backward(out.live), backward((0, g.n)), "{origin:?} {dir:?}");
+                }
+            }
         }
     }
 }
