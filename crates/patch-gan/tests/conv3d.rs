@@ -484,3 +484,58 @@ fn slice_path_forward_matches_the_direct_sum_with_stride() {
         assert!(err < 1e-12, "case {i}: max error {err}");
     }
 }
+
+/// The weight gradient sums many chunks in parallel; its bits must not depend on the thread
+/// count or on scheduling (training is reproducible from its seed).
+#[test]
+fn weight_gradient_bits_do_not_depend_on_threads() {
+    let dev = &Device::Cpu;
+    let x = Tensor::from_vec(
+        random(2 * 8 * 24 * 24 * 24, 11)
+            .into_iter()
+            .map(|v| v as f32)
+            .collect::<Vec<_>>(),
+        (2, 8, 24, 24, 24),
+        dev,
+    )
+    .unwrap();
+    let w = Var::from_tensor(
+        &Tensor::from_vec(
+            random(8 * 8 * 27, 12)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect::<Vec<_>>(),
+            (8, 8, 3, 3, 3),
+            dev,
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let cfg = ConvConfig {
+        padding: 1,
+        stride: 1,
+    };
+    let weight_grad_bits = || {
+        let y = functional::conv3d(&x, w.as_tensor(), cfg).unwrap();
+        let grads = y.sqr().unwrap().sum_all().unwrap().backward().unwrap();
+        let g: Vec<f32> = grads
+            .get(&w)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        g.iter().map(|v| v.to_bits()).collect::<Vec<u32>>()
+    };
+    let in_pool = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(weight_grad_bits)
+    };
+    let one = in_pool(1);
+    for threads in [2, 3, 2, 3] {
+        assert_eq!(in_pool(threads), one, "{threads} threads");
+    }
+}

@@ -204,17 +204,27 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     out
 }
 
+/// Partial sums of the weight gradient: the chunks are split into this many runs of
+/// consecutive chunks, each summed in order into its own buffer, and the buffers are added in
+/// order. The split depends only on the chunk count, so the gradient's bits do not depend on
+/// thread scheduling (a rayon `fold`/`reduce` splits where work stealing happens to, and made
+/// training differ from run to run in the last bits).
+const WEIGHT_GRAD_BLOCKS: usize = 8;
+
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `w`: shape `(C_out, C_in, kd, kh, kw)`.
 pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> Vec<T> {
     let (in_vox, out_vox, patch) = (g.in_voxels(), g.out_voxels(), g.patch_len());
     let w_out = g.output()[2];
     let size = g.c_out * patch;
     let max_cols = g.max_chunk_cols();
-    g.chunks()
-        .into_par_iter()
-        .fold(
-            || (vec![T::ZERO; size], vec![T::ZERO; patch * max_cols]),
-            |(mut acc, mut cols), (n, row0, rows)| {
+    let chunks = g.chunks();
+    let per_block = chunks.len().div_ceil(WEIGHT_GRAD_BLOCKS).max(1);
+    let partials: Vec<Vec<T>> = chunks
+        .par_chunks(per_block)
+        .map(|block| {
+            let mut acc = vec![T::ZERO; size];
+            let mut cols = vec![T::ZERO; patch * max_cols];
+            for &(n, row0, rows) in block {
                 let nc = rows * w_out;
                 let chunk_cols = &mut cols[..patch * nc];
                 fill_cols(chunk_cols, &x[n * g.c_in * in_vox..], g, row0, rows);
@@ -244,17 +254,15 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
                         Parallelism::None,
                     );
                 }
-                (acc, cols)
-            },
-        )
-        .map(|(acc, _)| acc)
-        .reduce(
-            || vec![T::ZERO; size],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(a, b)| *a = *a + b);
-                a
-            },
-        )
+            }
+            acc
+        })
+        .collect();
+    let mut total = vec![T::ZERO; size];
+    for partial in partials {
+        total.iter_mut().zip(partial).for_each(|(a, b)| *a = *a + b);
+    }
+    total
 }
 
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `x`: shape `(N, C_in, D, H, W)`.
