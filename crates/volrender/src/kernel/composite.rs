@@ -54,15 +54,15 @@ pub(crate) fn forward_ray<T: Real>(
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
-    let mut live: Option<(usize, usize)> = None;
+    let (mut first_live, mut end_live) = (None, 0);
     let mut chunks = Chunks::new(vol, occ, g, 0);
     'ray: while let Some(c) = chunks.next_chunk() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
             }
-            let i = c.index[l];
-            live = Some((live.map_or(i, |(from, _)| from), i + 1));
+            first_live.get_or_insert(c.index[l]);
+            end_live = c.index[l] + 1;
             let w = trans * c.alpha[l];
             for ch in 0..3 {
                 rgb[ch] = rgb[ch] + w * c.value[l][ch + 1];
@@ -88,7 +88,7 @@ pub(crate) fn forward_ray<T: Real>(
         // Rounding can push the sum of weights a few ulp past 1.
         opacity: opacity.min(T::one()),
         trans,
-        live: live.unwrap_or((0, 0)),
+        live: (first_live.unwrap_or(0), end_live),
     }
 }
 
@@ -109,11 +109,9 @@ pub(crate) fn backward_ray<T: Real>(
     let opacity_term = ga * out.trans;
     let mut upto = T::zero();
     let mut trans = T::one();
+    // Walk from the forward's first live sample and stop after its last (an empty span walks
+    // nothing).
     let (from, to) = out.live;
-    if from >= to {
-        return;
-    }
-    // Stop the walk after the forward's last live sample.
     let g = &RayGeom { n: to, ..*g };
     let mut chunks = Chunks::new(vol, occ, g, from);
     'ray: while let Some(c) = chunks.next_chunk() {
