@@ -200,6 +200,43 @@ impl Dataset {
         })
     }
 
+    /// Splits the frames for a held-out evaluation, as NeRF's LLFF convention does: with
+    /// `every = N`, frames 0, N, 2N, ... are held out and the rest train. Returns
+    /// `(training, held_out)` frame indices. Errors when `every < 2` (nothing would train or
+    /// every frame would) or when fewer than one frame would remain for either side.
+    ///
+    /// ```
+    /// # use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+    /// # let dir = tempfile::tempdir()?;
+    /// # let spec = DatasetSpec { views: 5, resolution: 8, grid: 8, seed: 1 };
+    /// # write_dataset(&singrav::scenes::Islands::new(1), dir.path(), &spec)?;
+    /// let data = Dataset::load(dir.path(), [1.0; 3])?;
+    /// let (train, held_out) = data.holdout_split(2)?;
+    /// assert_eq!((train, held_out), (vec![1, 3], vec![0, 2, 4]));
+    /// assert!(data.holdout_split(1).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn holdout_split(&self, every: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+        if every < 2 {
+            return Err(invalid(
+                "holdout",
+                format!("expected every N-th view held out with N >= 2, got {every}"),
+            ));
+        }
+        let (held_out, training): (Vec<usize>, Vec<usize>) =
+            (0..self.len()).partition(|i| i % every == 0);
+        if training.is_empty() {
+            return Err(invalid(
+                "holdout",
+                format!(
+                    "holding out every {every}-th of {} views leaves none to train on",
+                    self.len()
+                ),
+            ));
+        }
+        Ok((training, held_out))
+    }
+
     /// The dataset resized to `width` x `height` (area filter when shrinking, linear when
     /// enlarging, separately along each axis; any ratio), as tensors on `device`, with the
     /// cameras rescaled to match (same field of view, focal lengths and principal point scaled).

@@ -7,17 +7,20 @@
 //! - [`sifid_mv`]: SinGAN's SIFID ([`sifid`]) between each generated view and the real one,
 //!   averaged over views and scenes. Needs InceptionV3's first block
 //!   ([`InceptionBlock1::from_safetensors`], weights converted from torchvision).
+//! - [`psnr_per_view`] / [`mean_psnr`]: how closely renderings reproduce the real views.
 //! - [`FeatureGaussian`]: the Fréchet distance between Gaussians fitted to feature sets, which
 //!   SIFID (and FID) is.
 
 mod diversity;
 mod frechet;
 mod inception;
+mod psnr;
 mod sifid;
 
 pub use diversity::diversity_mv;
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
+pub use psnr::{mean_psnr, psnr_per_view};
 pub use sifid::{sifid, sifid_mv};
 
 /// Checks the multi-view metrics' input: at least `min_scenes` scenes, each seen from exactly
