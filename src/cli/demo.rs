@@ -103,7 +103,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
     let options = RunOptions {
         resume,
-        ..args.train.run_options()
+        ..args.train.run_options(&dataset, &run_dir)?
     };
     let model = train_with_progress(&config, &dataset, &run_dir, &options)?;
     let state = Checkpoint::load(&run_dir.join(CHECKPOINT_FILE), model.device())?.state;

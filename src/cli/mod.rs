@@ -9,6 +9,7 @@ mod demo;
 mod edit;
 mod eval;
 mod export;
+mod fit;
 mod info;
 mod model_io;
 mod render;
@@ -32,6 +33,8 @@ enum Command {
     Export(export::ExportArgs),
     /// Render a volume from the cameras of a transforms.json to EXR (R, G, B, A, Z) and PNG.
     Render(render::RenderArgs),
+    /// Reconstruct a dataset's scene directly as one radiance volume (no networks): VDB/EXR, PSNR.
+    Fit(fit::FitArgs),
     /// Render a built-in scene (stones, mushrooms, islands) into an RGB-D transforms.json dataset.
     Scene(scene::SceneArgs),
     /// Train SinGRAV on a transforms.json RGB-D dataset (progress bar, log, checkpoints).
@@ -58,6 +61,7 @@ pub fn run() -> ExitCode {
         Command::Info(args) => info::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Render(args) => render::run(&args),
+        Command::Fit(args) => fit::run(&args),
         Command::Scene(args) => scene::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),

@@ -55,7 +55,24 @@ pub struct TrainOptions {
     /// Seed of every random draw.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Also compare every 3D scale's reconstruction in 3D with this directly fitted volume
+    /// (from `volgen fit`; copied into the run).
+    #[arg(long, value_name = "VOLUME", conflicts_with = "fit")]
+    pub fitted: Option<PathBuf>,
+    /// Fit a volume to the dataset first (`volgen fit` at twice the finest 3D scale's edge,
+    /// written to RUN/fitted.safetensors) and train against it as --fitted does.
+    #[arg(long)]
+    pub fit: bool,
+    /// Steps of the fit --fit runs (default: `volgen fit`'s).
+    #[arg(long, value_name = "K", requires = "fit")]
+    pub fit_steps: Option<usize>,
+    /// Weight of the fitted-volume comparison (with --fitted or --fit).
+    #[arg(long, value_name = "W", default_value_t = DEFAULT_LAMBDA_FITTED)]
+    pub lambda_fitted: f64,
 }
+
+/// The fitted-volume weight `--fitted` and `--fit` use unless told otherwise.
+pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
 
 impl TrainOptions {
     /// The configuration these options describe.
@@ -74,24 +91,78 @@ impl TrainOptions {
         config.use_csg &= !self.no_csg;
         config.use_depth &= !self.no_depth;
         config.seed = self.seed;
+        if self.fitted.is_some() || self.fit {
+            config.lambda_fitted = self.lambda_fitted;
+        }
         config.validate()?;
         Ok(config)
     }
 
     /// How the run goes beside its configuration: resume or not, the VGG-19 weights.
-    pub fn run_options(&self) -> RunOptions {
-        RunOptions {
+    /// With `--fit`, runs the fit into `run_dir` (unless resuming a run that has its copy).
+    pub fn run_options(&self, dataset: &Dataset, run_dir: &Path) -> Result<RunOptions> {
+        let fitted_volume = match (&self.fitted, self.fit) {
+            (Some(path), _) => Some(path.clone()),
+            (None, true) => Some(fit_for_training(
+                &self.config()?,
+                self.fit_steps,
+                dataset,
+                run_dir,
+                self.resume,
+            )?),
+            (None, false) => None,
+        };
+        Ok(RunOptions {
             resume: self.resume,
             vgg19_weights: self.vgg19.clone(),
-        }
+            fitted_volume,
+        })
     }
+}
+
+/// Fits `dataset` at twice the finest 3D scale's edge into `run_dir/fitted.safetensors`, or
+/// reuses the file there when resuming.
+fn fit_for_training(
+    config: &TrainConfig,
+    steps: Option<usize>,
+    dataset: &Dataset,
+    run_dir: &Path,
+    resume: bool,
+) -> Result<PathBuf> {
+    let path = run_dir.join("fitted.safetensors");
+    if resume && path.exists() {
+        return Ok(path);
+    }
+    let size = 2 * config.volume_sizes.last().copied().unwrap_or(16);
+    let defaults = singrav::fit::FitConfig::default();
+    let fit_config = singrav::fit::FitConfig {
+        size,
+        start_size: defaults.start_size.min(size),
+        activation: config.activation(),
+        background: config.background,
+        use_depth: config.use_depth,
+        seed: config.seed,
+        budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
+        ..defaults
+    };
+    let all: Vec<usize> = (0..dataset.len()).collect();
+    let fitted = super::fit::fit_with_progress(dataset, &all, &fit_config)?;
+    std::fs::create_dir_all(run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
+    fitted.volume.save_safetensors(&path)?;
+    eprintln!(
+        "fitted {size}^3 to the dataset in {:.1} s: {}",
+        fitted.seconds,
+        path.display()
+    );
+    Ok(path)
 }
 
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
     let config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config)?;
-    train_with_progress(&config, &dataset, &args.out, &args.options.run_options())?;
+    let options = args.options.run_options(&dataset, &args.out)?;
+    train_with_progress(&config, &dataset, &args.out, &options)?;
     println!("trained model: {}", args.out.display());
     Ok(())
 }
@@ -175,6 +246,7 @@ fn format_losses(l: &StepLosses) -> String {
         ("gp", l.penalty),
         ("adv", l.adversarial),
         ("swd", l.swd),
+        ("fit", l.fitted),
     ];
     for (name, value) in optional {
         if let Some(v) = value {

@@ -3,6 +3,7 @@
 //!
 //! - [`scenes`]: built-in procedural scenes (stones, mushrooms, islands), so the project needs
 //!   no download; [`dataset`] renders them into, and loads, NeRF-style RGB-D datasets.
+//! - [`fit`]: a direct fit of one radiance volume to a dataset (no networks), in about a minute.
 //! - [`TrainConfig`]: presets (`paper`, `small`, `tiny`, `micro`) and ablation switches.
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
 //! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
@@ -35,6 +36,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod dataset;
 mod error;
+pub mod fit;
 mod io;
 pub mod metrics;
 pub mod model;

@@ -5,6 +5,7 @@
 
 mod critic;
 mod final_scale;
+mod fitted;
 mod log;
 mod run;
 mod texture;
@@ -47,6 +48,10 @@ pub struct RunOptions {
     /// convert them) for a configuration whose `swd_features` is
     /// [`crate::SwdFeatures::Vgg19`]; required then, refused otherwise.
     pub vgg19_weights: Option<PathBuf>,
+    /// A directly fitted volume (see [`crate::fit`]) for a configuration whose
+    /// `lambda_fitted` is positive; required then (unless resuming a run, which keeps its own
+    /// copy as `fitted.safetensors`), refused otherwise.
+    pub fitted_volume: Option<PathBuf>,
 }
 
 /// What an observer tells the trainer after a step.
@@ -74,6 +79,9 @@ pub struct StepLosses {
     pub depth: Option<f32>,
     /// Weighted sliced Wasserstein texture loss (last scale).
     pub swd: Option<f32>,
+    /// Weighted 3D comparison of the reconstruction with the fitted volume (3D scales of runs
+    /// with `lambda_fitted > 0`).
+    pub fitted: Option<f32>,
 }
 
 /// What just happened, for progress display.

@@ -5,9 +5,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
+use radiance_volume::RadianceVolume;
 
 use super::critic::Critic;
 use super::final_scale::FinalScale;
+use super::fitted::load_fitted;
 use super::log::LossLog;
 use super::texture::load_vgg19;
 use super::volume_scale::{picture_path, reconstruction_rmse, VolumeScale};
@@ -15,7 +17,7 @@ use super::{Control, Event, Progress, RunOptions, StepLosses};
 use crate::checkpoint::{write_config_json, Checkpoint, TrainState, CHECKPOINT_FILE, CONFIG_FILE};
 use crate::config::TrainConfig;
 use crate::dataset::Dataset;
-use crate::error::{Error, Result};
+use crate::error::{invalid, Error, Result};
 use crate::model::{load_into, var_tensors, SinGrav};
 use crate::noise::step_rng;
 use crate::optim::Adam;
@@ -76,8 +78,13 @@ pub fn train(
 ) -> Result<TrainOutcome> {
     config.validate()?;
     let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
+    let fitted = load_fitted_target(config, options, run_dir)?;
     let resume = options.resume;
     crate::io::create_dir(run_dir)?;
+    if let Some((volume, true)) = &fitted {
+        volume.save_safetensors(run_dir.join(FITTED_FILE))?;
+    }
+    let fitted = fitted.map(|(volume, _)| volume);
     let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
     let (mut model, mut state, saved) = if resume {
         let checkpoint = Checkpoint::load(&checkpoint_file, device)?;
@@ -151,15 +158,18 @@ pub fn train(
                 model.push_generator(amp, &mut setup)?;
                 state.noise_amps.push(amp);
             }
-            Box::new(VolumeScale::new(
-                &model,
-                n,
-                level,
-                state.depth_norm,
-                prev_reconstruction,
-                previous,
-                &mut setup,
-            )?)
+            Box::new(
+                VolumeScale::new(
+                    &model,
+                    n,
+                    level,
+                    state.depth_norm,
+                    prev_reconstruction,
+                    previous,
+                    &mut setup,
+                )?
+                .with_fitted(fitted.as_ref())?,
+            )
         } else {
             if fresh {
                 model.push_upsampler(&mut setup)?;
@@ -300,6 +310,7 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("colour reconstruction", Some(losses.color)),
         ("depth reconstruction", losses.depth),
         ("SWD loss", losses.swd),
+        ("fitted-volume comparison", losses.fitted),
     ];
     for (what, value) in terms {
         if let Some(value) = value.filter(|v| !v.is_finite()) {
@@ -312,6 +323,48 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The run's copy of the fitted volume, so that a resumed run compares with what it started with.
+const FITTED_FILE: &str = "fitted.safetensors";
+
+/// The fitted volume a configuration with `lambda_fitted > 0` trains against, and whether it is
+/// new to the run (to be copied into it): the one `options` names, else on resume the run's
+/// copy. Errors when one is needed and missing, or given and not needed.
+fn load_fitted_target(
+    config: &TrainConfig,
+    options: &RunOptions,
+    run_dir: &Path,
+) -> Result<Option<(RadianceVolume, bool)>> {
+    let copy = run_dir.join(FITTED_FILE);
+    if config.lambda_fitted == 0.0 {
+        return match &options.fitted_volume {
+            Some(path) => Err(invalid(
+                "fitted volume",
+                format!(
+                    "{} was given but the configuration's lambda_fitted is 0; set a positive \
+                     weight to train against it",
+                    path.display()
+                ),
+            )),
+            None => Ok(None),
+        };
+    }
+    let (path, new) = match &options.fitted_volume {
+        Some(path) => (path.clone(), *path != copy),
+        None if options.resume && copy.exists() => (copy, false),
+        None => {
+            return Err(invalid(
+                "fitted volume",
+                format!(
+                    "lambda_fitted is {} but no fitted volume was given (volgen: --fitted FILE \
+                     or --fit)",
+                    config.lambda_fitted
+                ),
+            ))
+        }
+    };
+    Ok(Some((load_fitted(&path)?, new)))
 }
 
 /// The tensors under `prefix`, with the prefix removed.

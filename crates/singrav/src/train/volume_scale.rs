@@ -5,9 +5,11 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{Tensor, D};
+use radiance_volume::RadianceVolume;
 use rand::Rng;
 
 use super::critic::Critic;
+use super::fitted::FittedTarget;
 use super::run::Stage;
 use super::StepLosses;
 use crate::config::TrainConfig;
@@ -39,6 +41,8 @@ pub(super) struct VolumeScale<'a> {
     opt: Adam,
     /// The frozen reconstruction V*_{n-1} (raw), for n >= 2.
     prev_reconstruction: Option<Tensor>,
+    /// The fitted volume at this scale's size, when the run trains against one.
+    fitted: Option<FittedTarget>,
 }
 
 /// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
@@ -97,7 +101,18 @@ impl<'a> VolumeScale<'a> {
             critic,
             opt,
             prev_reconstruction,
+            fitted: None,
         })
+    }
+
+    /// Also compares the reconstruction in 3D with `fitted` (resampled to this scale), weighted
+    /// by the configuration's `lambda_fitted`.
+    pub fn with_fitted(mut self, fitted: Option<&RadianceVolume>) -> Result<Self> {
+        let size = self.config.volume_sizes[self.n - 1];
+        self.fitted = fitted
+            .map(|volume| FittedTarget::new(volume, size, self.model.device()))
+            .transpose()?;
+        Ok(self)
     }
 
     /// Draws fresh noise at every scale and runs the frozen coarser scales on it.
@@ -170,7 +185,8 @@ impl Stage for VolumeScale<'_> {
             losses.critic = Some(critic);
             losses.penalty = Some(penalty);
         }
-        let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
+        let (mut adversarial_sum, mut color_sum, mut depth_sum, mut fitted_sum) =
+            (0.0, 0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
@@ -183,9 +199,16 @@ impl Stage for VolumeScale<'_> {
                 total = (total + adv)?;
             }
             let rec_views = pick_views(rng, views, self.config.views_per_step);
+            let reconstruction = self.reconstruction()?;
+            if let Some(fitted) = &self.fitted {
+                let loss = (fitted.loss(&reconstruction, &self.config.activation())?
+                    * self.config.lambda_fitted)?;
+                fitted_sum += loss.to_scalar::<f32>()?;
+                total = (total + loss)?;
+            }
             let (rgb, depth) = self
                 .renderer
-                .render(&self.reconstruction()?, &self.cameras(&rec_views))?;
+                .render(&reconstruction, &self.cameras(&rec_views))?;
             let color =
                 (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
@@ -202,6 +225,7 @@ impl Stage for VolumeScale<'_> {
         losses.color = color_sum / steps;
         losses.depth = self.config.use_depth.then_some(depth_sum / steps);
         losses.adversarial = adversarial.then_some(adversarial_sum / steps);
+        losses.fitted = self.fitted.is_some().then_some(fitted_sum / steps);
         Ok(losses)
     }
 

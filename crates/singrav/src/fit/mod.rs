@@ -1,0 +1,394 @@
+//! Direct fitting: multi-view RGB-D images to one radiance volume, by gradient descent through
+//! the differentiable renderer, as DVGO and Plenoxels reconstruct a scene (no networks).
+//!
+//! A fit optimises a raw `(4, s, s, s)` grid under the same [`Activation`] the SinGRAV
+//! generators use, so a fitted volume is directly comparable with (and usable as a target for)
+//! a trained pyramid's volumes:
+//!
+//! - each step renders a random batch of rays drawn from all training pixels and takes one
+//!   Adam step on `lambda_color mse(colour) + lambda_depth mse(depth) + lambda_opacity
+//!   mse(opacity)` plus total variation ([`Regularisers`]);
+//! - coarse to fine: the grid starts at `start_size` and grows geometrically to `size` over the
+//!   first `growth_until` of the budget (trilinear resampling of the raw values);
+//! - an occupancy mask, refreshed every `occupancy_every` steps, kills voxels farther than one
+//!   voxel from any voxel of opacity `occupancy_threshold`: they render as exactly empty, so the
+//!   renderer's empty-space skipping leaps over them, and they are not updated;
+//! - the learning rate decays exponentially from `learning_rate` to `final_learning_rate`.
+//!
+//! ```
+//! use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+//! use singrav::fit::{fit_volume, view_psnr, FitBudget, FitConfig};
+//! let dir = tempfile::tempdir()?;
+//! let spec = DatasetSpec { views: 6, resolution: 16, grid: 16, seed: 1 };
+//! write_dataset(&singrav::scenes::StandingStones::new(1), dir.path(), &spec)?;
+//! let data = Dataset::load(dir.path(), [1.0; 3])?;
+//! let config = FitConfig { size: 12, budget: FitBudget::Steps(40), rays_per_step: 512, ..FitConfig::default() };
+//! let fitted = fit_volume(&data, &[0, 1, 2, 3, 4, 5], &config, &mut |_| {})?;
+//! assert_eq!(fitted.volume.dims().xyz(), [12, 12, 12]);
+//! let psnr = view_psnr(&fitted.volume, &data, &[0], &config)?;
+//! assert!(psnr[0] > 10.0, "{psnr:?}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod grid;
+mod rays;
+
+use std::time::Instant;
+
+use candle_core::{Device, Tensor, Var};
+use radiance_volume::{Aabb, Activation, RadianceVolume};
+use rand::SeedableRng;
+use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+
+use crate::dataset::Dataset;
+use crate::error::{invalid, Result};
+use crate::TrainConfig;
+
+pub use grid::Regularisers;
+
+use grid::{FitGrid, CHANNELS};
+use rays::RayBank;
+
+/// How long a fit runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FitBudget {
+    /// A fixed number of steps (reproducible from the seed).
+    Steps(usize),
+    /// Wall-clock seconds (the schedule follows elapsed time, so results vary with the machine).
+    Seconds(f64),
+}
+
+/// The settings of a fit. The defaults are what docs/fit.md measured on the built-in scenes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitConfig {
+    /// Edge of the final grid in voxels.
+    pub size: usize,
+    /// Edge of the grid the fit starts from (at most `size`).
+    pub start_size: usize,
+    /// Fraction of the budget by which the grid has grown to `size`.
+    pub growth_until: f32,
+    /// How long the fit runs.
+    pub budget: FitBudget,
+    /// Rays per step, drawn uniformly from all training pixels.
+    pub rays_per_step: usize,
+    /// Adam's learning rate on raw values at the start.
+    pub learning_rate: f32,
+    /// The learning rate at the end of the budget (exponential decay in between).
+    pub final_learning_rate: f32,
+    /// Weight of the colour mse.
+    pub lambda_color: f32,
+    /// Weight of the depth mse (world units); ignored when `use_depth` is off.
+    pub lambda_depth: f32,
+    /// Weight of the opacity (alpha) mse.
+    pub lambda_opacity: f32,
+    /// Total variation weights.
+    pub regularisers: Regularisers,
+    /// Samples per voxel crossed (the renderer's `PerVoxel` sampler at the current size).
+    pub samples_per_voxel: usize,
+    /// Density everywhere at the start, per world length.
+    pub initial_sigma: f32,
+    /// Opacity across one voxel below which a voxel (and no neighbour) counts as empty.
+    pub occupancy_threshold: f32,
+    /// Steps between refreshes of the occupancy mask (0: never).
+    pub occupancy_every: usize,
+    /// Raw to physical mapping (the training configuration's, so fits and generators agree).
+    pub activation: Activation,
+    /// What transparent pixels were composited on (the dataset's loading background).
+    pub background: [f32; 3],
+    /// The world box the grid covers.
+    pub aabb: Aabb,
+    /// Supervise depth.
+    pub use_depth: bool,
+    /// Seed of the ray draws.
+    pub seed: u64,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        let training = TrainConfig::preset("tiny").expect("the tiny preset exists");
+        Self {
+            size: 64,
+            start_size: 24,
+            growth_until: 0.4,
+            budget: FitBudget::Steps(1000),
+            rays_per_step: 8192,
+            learning_rate: 0.1,
+            final_learning_rate: 0.01,
+            lambda_color: 10.0,
+            lambda_depth: 1.2,
+            lambda_opacity: 1.0,
+            regularisers: Regularisers {
+                tv_density: 0.0,
+                tv_colour: 0.0,
+            },
+            samples_per_voxel: 2,
+            initial_sigma: 0.1,
+            occupancy_threshold: 1e-3,
+            occupancy_every: 50,
+            activation: training.activation(),
+            background: training.background,
+            aabb: Aabb::CUBE,
+            use_depth: true,
+            seed: 0,
+        }
+    }
+}
+
+impl FitConfig {
+    /// Checks the settings, naming the first that is out of range.
+    pub fn validate(&self) -> Result<()> {
+        let checks = [
+            (self.size >= 2, "size", "at least 2 voxels"),
+            (
+                (2..=self.size).contains(&self.start_size),
+                "start_size",
+                "between 2 and size",
+            ),
+            (
+                (0.0..=1.0).contains(&self.growth_until),
+                "growth_until",
+                "a fraction in [0, 1]",
+            ),
+            (
+                match self.budget {
+                    FitBudget::Steps(n) => n > 0,
+                    FitBudget::Seconds(s) => s > 0.0 && s.is_finite(),
+                },
+                "budget",
+                "a positive number of steps or seconds",
+            ),
+            (self.rays_per_step > 0, "rays_per_step", "at least 1"),
+            (
+                self.learning_rate > 0.0 && self.final_learning_rate > 0.0,
+                "learning_rate",
+                "positive start and final rates",
+            ),
+            (
+                [self.lambda_color, self.lambda_depth, self.lambda_opacity]
+                    .iter()
+                    .chain([&self.regularisers.tv_density, &self.regularisers.tv_colour])
+                    .all(|w| *w >= 0.0 && w.is_finite()),
+                "loss weights",
+                "finite and >= 0",
+            ),
+            (
+                self.samples_per_voxel > 0,
+                "samples_per_voxel",
+                "at least 1",
+            ),
+            (
+                self.initial_sigma > 0.0 && self.initial_sigma.is_finite(),
+                "initial_sigma",
+                "a positive density",
+            ),
+            (
+                (0.0..1.0).contains(&self.occupancy_threshold),
+                "occupancy_threshold",
+                "an opacity in [0, 1)",
+            ),
+        ];
+        match checks.iter().find(|(ok, _, _)| !ok) {
+            Some((_, what, expected)) => Err(invalid(
+                format!("fit setting {what}"),
+                format!("expected {expected}"),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The renderer a fit (and its evaluation) uses at grid edge `size`.
+    fn render_config(&self) -> RenderConfig {
+        RenderConfig::default()
+            .with_sampler(Sampler::PerVoxel {
+                per_voxel: self.samples_per_voxel,
+            })
+            .with_skip_empty(true)
+            .with_background(self.background)
+            .with_aabb(self.aabb)
+    }
+
+    /// The grid edge at budget fraction `fraction`: geometric steps from `start_size` to
+    /// `size`, one per doubling of the voxel count, ending at `growth_until`.
+    fn size_at(&self, fraction: f32) -> usize {
+        if self.start_size >= self.size || fraction >= self.growth_until {
+            return self.size;
+        }
+        let ratio = self.size as f32 / self.start_size as f32;
+        // One stage per doubling of the voxel count (a factor 2^(1/3) on the edge).
+        let stages = (3.0 * ratio.log2()).ceil().max(1.0);
+        let stage = (fraction / self.growth_until * stages).floor();
+        ((self.start_size as f32) * ratio.powf(stage / stages)).round() as usize
+    }
+
+    fn learning_rate_at(&self, fraction: f32) -> f32 {
+        self.learning_rate * (self.final_learning_rate / self.learning_rate).powf(fraction)
+    }
+}
+
+/// What the observer of a fit sees after every step.
+#[derive(Debug, Clone)]
+pub struct FitProgress {
+    /// Steps taken.
+    pub step: usize,
+    /// Fraction of the budget used, in [0, 1].
+    pub fraction: f32,
+    /// The grid's current edge.
+    pub size: usize,
+    /// The step's colour PSNR over its ray batch, in dB.
+    pub batch_psnr: f64,
+    /// The fraction of voxels that are live (not skipped as empty).
+    pub live_fraction: f32,
+}
+
+/// A fitted volume and how the fit went.
+#[derive(Debug, Clone)]
+pub struct FittedVolume {
+    /// The physical volume (density exactly 0 where the occupancy mask found nothing).
+    pub volume: RadianceVolume,
+    /// Steps taken.
+    pub steps: usize,
+    /// Wall-clock seconds of the fit.
+    pub seconds: f64,
+    /// The fraction of voxels live at the end.
+    pub live_fraction: f32,
+}
+
+/// Fits a radiance volume to the views `training` of `dataset` (loaded with the config's
+/// background), calling `observer` after every step.
+///
+/// Errors on bad settings, an empty or out-of-range view list, or a renderer failure.
+pub fn fit_volume(
+    dataset: &Dataset,
+    training: &[usize],
+    config: &FitConfig,
+    observer: &mut dyn FnMut(&FitProgress),
+) -> Result<FittedVolume> {
+    config.validate()?;
+    let views = dataset.subset(training)?;
+    let level = views.level(views.width(), views.height(), &Device::Cpu)?;
+    let bank = RayBank::from_level(&level)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
+    let mut grid = FitGrid::new(config.size_at(0.0), config.activation, config.initial_sigma)?;
+    let render_config = config
+        .render_config()
+        .with_depth(config.use_depth && config.lambda_depth > 0.0)
+        .with_opacity(config.lambda_opacity > 0.0);
+    let start = Instant::now();
+    let mut step = 0;
+    let mut steps_at_size = 0;
+    loop {
+        let fraction = match config.budget {
+            FitBudget::Steps(n) => step as f32 / n as f32,
+            FitBudget::Seconds(s) => (start.elapsed().as_secs_f64() / s) as f32,
+        };
+        if fraction >= 1.0 {
+            break;
+        }
+        let size = config.size_at(fraction);
+        if size != grid.size() {
+            grid.grow(size)?;
+            steps_at_size = 0;
+        }
+        // The first refresh waits for the fit to have put matter where the views show it.
+        if config.occupancy_every > 0
+            && steps_at_size > 0
+            && steps_at_size % config.occupancy_every == 0
+            && fraction > 0.05
+        {
+            grid.refresh_live(config.occupancy_threshold, voxel_length(config.aabb, size));
+        }
+        let batch = bank.batch(&mut rng, config.rays_per_step)?;
+        let physical = Var::from_tensor(&Tensor::from_vec(
+            grid.physical(),
+            (CHANNELS, size, size, size),
+            &Device::Cpu,
+        )?)?;
+        let out = render(physical.as_tensor(), &batch.rays, &render_config)?;
+        let colour_mse = (&out.rgb - &batch.rgb)?.sqr()?.mean_all()?;
+        let mut loss = (&colour_mse * f64::from(config.lambda_color))?;
+        if let Some(depth) = &out.depth {
+            let depth_mse = (depth - &batch.depth)?.sqr()?.mean_all()?;
+            loss = (loss + (depth_mse * f64::from(config.lambda_depth))?)?;
+        }
+        if let Some(opacity) = &out.opacity {
+            let opacity_mse = (opacity - &batch.opacity)?.sqr()?.mean_all()?;
+            loss = (loss + (opacity_mse * f64::from(config.lambda_opacity))?)?;
+        }
+        let loss_value = loss.to_scalar::<f32>()?;
+        if !loss_value.is_finite() {
+            return Err(invalid(
+                "fit",
+                format!("the loss became {loss_value} at step {step}; lower the learning rate"),
+            ));
+        }
+        let grads = loss.backward()?;
+        let mut grad: Vec<f32> = match grads.get(&physical) {
+            Some(g) => g.flatten_all()?.to_vec1()?,
+            None => vec![0.0; CHANNELS * size * size * size],
+        };
+        grid.raw_gradient(&mut grad, &config.regularisers);
+        grid.adam_step(&grad, config.learning_rate_at(fraction));
+        step += 1;
+        steps_at_size += 1;
+        observer(&FitProgress {
+            step,
+            fraction,
+            size,
+            batch_psnr: -10.0 * f64::from(colour_mse.to_scalar::<f32>()?).log10(),
+            live_fraction: grid.live_fraction(),
+        });
+    }
+    let size = grid.size();
+    let volume = RadianceVolume::new(
+        Tensor::from_vec(grid.physical(), (CHANNELS, size, size, size), &Device::Cpu)?,
+        config.aabb,
+    )?;
+    Ok(FittedVolume {
+        volume,
+        steps: step,
+        seconds: start.elapsed().as_secs_f64(),
+        live_fraction: grid.live_fraction(),
+    })
+}
+
+/// The edge of a voxel of an `size^3` grid over `aabb` (the smallest of the three).
+fn voxel_length(aabb: Aabb, size: usize) -> f32 {
+    aabb.size().min_element() / size as f32
+}
+
+/// Renders a physical `volume` from `cameras` (all of one size) with the fit's renderer:
+/// colour `(V, 3, h, w)`.
+pub fn render_views(
+    volume: &RadianceVolume,
+    cameras: &[Camera],
+    config: &FitConfig,
+) -> Result<Tensor> {
+    let Some(first) = cameras.first() else {
+        return Err(invalid("cameras", "need at least one camera"));
+    };
+    let (w, h) = (first.width, first.height);
+    let cfg = config.render_config().with_aabb(volume.aabb());
+    let mut views = Vec::with_capacity(cameras.len());
+    for camera in cameras {
+        if (camera.width, camera.height) != (w, h) {
+            return Err(invalid("cameras", "all cameras must share a size"));
+        }
+        let out = render(volume.tensor(), &Rays::from_camera(camera), &cfg)?;
+        views.push(out.rgb.reshape((h, w, 3))?.permute((2, 0, 1))?);
+    }
+    Ok(Tensor::stack(&views, 0)?)
+}
+
+/// The colour PSNR (dB) of `volume` rendered from each view `indices` of `dataset` against its
+/// image (composited on the config's background, as the dataset was loaded).
+pub fn view_psnr(
+    volume: &RadianceVolume,
+    dataset: &Dataset,
+    indices: &[usize],
+    config: &FitConfig,
+) -> Result<Vec<f64>> {
+    let views = dataset.subset(indices)?;
+    let level = views.level(views.width(), views.height(), &Device::Cpu)?;
+    let rendered = render_views(volume, &level.cameras, config)?;
+    crate::metrics::psnr_per_view(&rendered, &level.images)
+}

@@ -1,0 +1,121 @@
+//! A directly fitted volume (see [`crate::fit`]) as a 3D target for the reconstruction V*_n:
+//! an exact, cheap comparison that gives every voxel a gradient, where the views give only the
+//! voxels along a few rays.
+
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use radiance_volume::{Activation, GridDims, RadianceVolume};
+
+use crate::error::{invalid, Result};
+
+/// The fitted volume at one scale's size, as opacity per voxel and opacity-weighted colour.
+///
+/// Both are compared rather than density and colour themselves: opacity across a voxel,
+/// `1 - exp(-sigma * voxel)`, is bounded (a stone's sigma of 200 and one of 2000 look the same),
+/// and colour only matters where there is matter to see.
+#[derive(Debug, Clone)]
+pub(super) struct FittedTarget {
+    /// `(1, 1, s, s, s)`.
+    opacity: Tensor,
+    /// `(1, 3, s, s, s)`: the fitted colour times the fitted opacity.
+    weighted_rgb: Tensor,
+    voxel: f64,
+}
+
+/// Per-voxel opacity of a physical density `(.., 1, s, s, s)` across a voxel of edge `voxel`.
+fn voxel_opacity(sigma: &Tensor, voxel: f64) -> Result<Tensor> {
+    Ok(((sigma * -voxel)?.exp()?.neg()? + 1.0)?)
+}
+
+impl FittedTarget {
+    /// The target at edge `size`: `volume` resampled (trilinear, cell-centred) over the same box.
+    pub fn new(volume: &RadianceVolume, size: usize, device: &Device) -> Result<Self> {
+        let resampled = volume.resample(GridDims::cube(size))?;
+        let physical = resampled
+            .tensor()
+            .narrow(0, 0, 4)?
+            .unsqueeze(0)?
+            .to_device(device)?;
+        let voxel = 2.0 / size as f64;
+        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, voxel)?;
+        let weighted_rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?;
+        Ok(Self {
+            opacity,
+            weighted_rgb,
+            voxel,
+        })
+    }
+
+    /// The mean squared difference of opacity plus that of opacity-weighted colour, the
+    /// reconstruction's colour weighted by the *fitted* opacity (so that colour in what should
+    /// be empty space costs nothing), for a raw `(1, 4, s, s, s)` reconstruction.
+    pub fn loss(&self, raw: &Tensor, activation: &Activation) -> Result<Tensor> {
+        let physical = activation.apply(raw)?;
+        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
+        let rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&self.opacity)?;
+        let opacity_term = (opacity - &self.opacity)?.sqr()?.mean_all()?;
+        let colour_term = (rgb - &self.weighted_rgb)?.sqr()?.mean_all()?;
+        Ok((opacity_term + colour_term)?)
+    }
+}
+
+/// Loads a fitted volume for training, checking what training assumes: the default box
+/// `[-1, 1]^3`, a cubic grid, density and RGB channels.
+pub(crate) fn load_fitted(path: &Path) -> Result<RadianceVolume> {
+    let volume = RadianceVolume::load_safetensors(path)?;
+    let dims = volume.dims();
+    let why = if volume.aabb() != radiance_volume::Aabb::CUBE {
+        Some(format!(
+            "its box is {:?}; training works in [-1, 1]^3",
+            volume.aabb()
+        ))
+    } else if dims.d != dims.h || dims.h != dims.w {
+        Some(format!("its grid {:?} is not cubic", dims.xyz()))
+    } else if volume.channel_count() < 4 {
+        Some(format!(
+            "it has {} channels; expected density and RGB",
+            volume.channel_count()
+        ))
+    } else {
+        None
+    };
+    match why {
+        Some(why) => Err(invalid(format!("fitted volume {}", path.display()), why)),
+        None => Ok(volume),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use radiance_volume::Aabb;
+
+    #[test]
+    fn loss_is_zero_for_the_fitted_volume_itself_and_grows_with_a_difference() -> Result<()> {
+        let activation = Activation::default()
+            .with_density_scale(25.0)
+            .with_density_shift(-4.0);
+        let raw = Tensor::randn(0f32, 2.0, (1, 4, 6, 6, 6), &Device::Cpu)?;
+        let volume = RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &activation)?;
+        let target = FittedTarget::new(&volume, 6, &Device::Cpu)?;
+        let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
+        assert!(same < 1e-10, "{same}");
+        let other = target
+            .loss(&(raw + 1.0)?, &activation)?
+            .to_scalar::<f32>()?;
+        assert!(other > 1e-3, "{other}");
+        Ok(())
+    }
+
+    #[test]
+    fn opacity_is_one_minus_transmittance_across_a_voxel() -> Result<()> {
+        let sigma = Tensor::new(&[0f32, 1.0, 100.0], &Device::Cpu)?;
+        let got: Vec<f32> = voxel_opacity(&sigma, 0.5)?.to_vec1()?;
+        let want = [0.0, 1.0 - (-0.5f32).exp(), 1.0];
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "{g} vs {w}");
+        }
+        Ok(())
+    }
+}

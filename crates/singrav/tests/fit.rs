@@ -1,0 +1,125 @@
+//! Direct fits: a scene rendered from known cameras is fitted back to a stated PSNR on the
+//! views it saw and on views it did not, reproducibly from its seed.
+
+use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+use singrav::fit::{fit_volume, view_psnr, FitBudget, FitConfig};
+use singrav::scenes::StandingStones;
+
+fn stones(views: usize) -> (tempfile::TempDir, Dataset) {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = DatasetSpec {
+        views,
+        resolution: 32,
+        grid: 32,
+        seed: 3,
+    };
+    write_dataset(&StandingStones::new(3), dir.path(), &spec).unwrap();
+    let data = Dataset::load(dir.path(), [1.0; 3]).unwrap();
+    (dir, data)
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn a_rendered_scene_is_fitted_back_on_seen_and_held_out_views() {
+    let (_dir, data) = stones(24);
+    let (training, held_out) = data.holdout_split(6).unwrap();
+    let config = FitConfig {
+        size: 24,
+        start_size: 12,
+        budget: FitBudget::Steps(300),
+        rays_per_step: 2048,
+        ..FitConfig::default()
+    };
+    let mut last_size = 0;
+    let fitted = fit_volume(&data, &training, &config, &mut |p| last_size = p.size).unwrap();
+    assert_eq!((fitted.steps, last_size), (300, 24));
+    let seen = mean(&view_psnr(&fitted.volume, &data, &training, &config).unwrap());
+    let unseen = mean(&view_psnr(&fitted.volume, &data, &held_out, &config).unwrap());
+    println!(
+        "seen {seen:.2} dB, held out {unseen:.2} dB, live {}",
+        fitted.live_fraction
+    );
+    // Measured 2026-11-24: 30.6 dB seen and 27.3 dB held out; a grey fog scores about 9.
+    assert!(seen > 27.0, "training views {seen:.2} dB");
+    assert!(unseen > 24.0, "held-out views {unseen:.2} dB");
+    // The occupancy mask found the sky empty: density exactly 0 in most voxels.
+    assert!(fitted.live_fraction < 0.8, "{}", fitted.live_fraction);
+    let density: Vec<f32> = fitted
+        .volume
+        .density()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let empty = density.iter().filter(|&&d| d == 0.0).count() as f32 / density.len() as f32;
+    assert!(empty > 0.2, "{empty}");
+}
+
+#[test]
+fn the_same_seed_fits_the_same_bits() {
+    let (_dir, data) = stones(4);
+    let config = FitConfig {
+        size: 10,
+        start_size: 6,
+        budget: FitBudget::Steps(30),
+        rays_per_step: 512,
+        seed: 7,
+        ..FitConfig::default()
+    };
+    let all = [0, 1, 2, 3];
+    let values = |c: &FitConfig| -> Vec<f32> {
+        let fitted = fit_volume(&data, &all, c, &mut |_| {}).unwrap();
+        fitted
+            .volume
+            .tensor()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap()
+    };
+    let first = values(&config);
+    assert_eq!(first, values(&config));
+    assert_ne!(first, values(&FitConfig { seed: 8, ..config }));
+}
+
+#[test]
+fn bad_settings_and_views_are_named() {
+    let (_dir, data) = stones(2);
+    let fit = |config: FitConfig, views: &[usize]| {
+        fit_volume(&data, views, &config, &mut |_| {})
+            .unwrap_err()
+            .to_string()
+    };
+    let err = fit(
+        FitConfig {
+            size: 1,
+            ..FitConfig::default()
+        },
+        &[0],
+    );
+    assert!(err.contains("size"), "{err}");
+    let err = fit(
+        FitConfig {
+            start_size: 80,
+            ..FitConfig::default()
+        },
+        &[0],
+    );
+    assert!(err.contains("start_size"), "{err}");
+    let err = fit(
+        FitConfig {
+            budget: FitBudget::Seconds(f64::NAN),
+            ..FitConfig::default()
+        },
+        &[0],
+    );
+    assert!(err.contains("budget"), "{err}");
+    let err = fit(FitConfig::default(), &[5]);
+    assert!(err.contains("frame 5 does not exist"), "{err}");
+    let err = fit(FitConfig::default(), &[]);
+    assert!(err.contains("at least one frame"), "{err}");
+}

@@ -1,0 +1,238 @@
+//! `volgen fit DATASET --size N --out VOLUME.safetensors [--vdb FILE] [--exr-slices DIR]
+//! [--steps K | --seconds T] [--holdout N]`: reconstruct a dataset's scene directly as one
+//! radiance volume (no networks), report PSNR on training and held-out views, and write the
+//! volume as `volgen sample` writes scenes.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{ensure, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+use singrav::dataset::Dataset;
+use singrav::fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, FittedVolume};
+
+use super::export::{write_exr_slices, write_vdb, Encoding};
+
+/// Arguments of `volgen fit`.
+#[derive(Debug, clap::Args)]
+#[command(after_help = "docs/fit.md has measured times and PSNR for the built-in scenes.")]
+pub struct FitArgs {
+    /// The dataset: a transforms.json or the directory holding it.
+    dataset: PathBuf,
+    /// Edge of the fitted grid in voxels.
+    #[arg(long, default_value_t = 64)]
+    size: usize,
+    /// Where to write the physical volume (safetensors); `.png` and `.fit.json` go beside it.
+    #[arg(long, value_name = "VOLUME.safetensors")]
+    out: PathBuf,
+    /// Also write the volume as OpenVDB to this file.
+    #[arg(long, value_name = "FILE")]
+    vdb: Option<PathBuf>,
+    /// Also write the volume as a stack of EXR slices into this directory.
+    #[arg(long, value_name = "DIR")]
+    exr_slices: Option<PathBuf>,
+    /// Optimisation steps (default 1000 when --seconds is not given).
+    #[arg(long, value_name = "K", conflicts_with = "seconds")]
+    steps: Option<usize>,
+    /// Wall-clock budget in seconds instead of a step count.
+    #[arg(long, value_name = "T")]
+    seconds: Option<f64>,
+    /// Keep every N-th view (0, N, 2N, ...) out of the fit and report PSNR on them separately.
+    #[arg(long, value_name = "N")]
+    holdout: Option<usize>,
+    /// Edge of the grid the fit starts from (grown coarse to fine to --size).
+    #[arg(long, value_name = "N")]
+    start_size: Option<usize>,
+    /// Rays per step.
+    #[arg(long, default_value_t = FitConfig::default().rays_per_step)]
+    rays: usize,
+    /// Fit colour and opacity only, ignoring the dataset's depth.
+    #[arg(long)]
+    no_depth: bool,
+    /// Seed of the ray draws.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// What `VOLUME.fit.json` records.
+#[derive(Debug, Serialize)]
+struct FitReport<'a> {
+    dataset: &'a Path,
+    size: usize,
+    steps: usize,
+    seconds: f64,
+    live_fraction: f32,
+    training_views: usize,
+    /// Mean PSNR (dB) over the training views.
+    training_psnr: f64,
+    held_out_views: usize,
+    /// Mean PSNR (dB) over the held-out views; null without --holdout.
+    held_out_psnr: Option<f64>,
+    /// Seconds spent rendering the views for the PSNR (not part of `seconds`).
+    evaluation_seconds: f64,
+}
+
+/// Fits as the arguments say.
+pub fn run(args: &FitArgs) -> Result<()> {
+    ensure!(
+        args.out.extension().is_some_and(|e| e == "safetensors"),
+        "--out {}: expected a file name ending in .safetensors",
+        args.out.display()
+    );
+    let config = fit_config(args)?;
+    let dataset = Dataset::load(&args.dataset, config.background)
+        .with_context(|| format!("loading the dataset {}", args.dataset.display()))?;
+    let (training, held_out) = match args.holdout {
+        Some(every) => dataset.holdout_split(every)?,
+        None => ((0..dataset.len()).collect(), Vec::new()),
+    };
+    let fitted = fit_with_progress(&dataset, &training, &config)?;
+    let evaluation_start = std::time::Instant::now();
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let training_psnr = mean(view_psnr(&fitted.volume, &dataset, &training, &config)?);
+    let held_out_psnr = if held_out.is_empty() {
+        None
+    } else {
+        Some(mean(view_psnr(
+            &fitted.volume,
+            &dataset,
+            &held_out,
+            &config,
+        )?))
+    };
+    let report = FitReport {
+        dataset: &args.dataset,
+        size: config.size,
+        steps: fitted.steps,
+        seconds: fitted.seconds,
+        live_fraction: fitted.live_fraction,
+        training_views: training.len(),
+        training_psnr,
+        held_out_views: held_out.len(),
+        held_out_psnr,
+        evaluation_seconds: evaluation_start.elapsed().as_secs_f64(),
+    };
+    println!(
+        "fitted {size}^3 in {:.1} s ({} steps): PSNR {:.2} dB over {} training views{}",
+        fitted.seconds,
+        fitted.steps,
+        training_psnr,
+        training.len(),
+        held_out_psnr
+            .map(|p| format!(", {p:.2} dB over {} held-out views", held_out.len()))
+            .unwrap_or_default(),
+        size = config.size,
+    );
+    write_outputs(args, &dataset, &fitted, &config, &held_out, &report)
+}
+
+/// The fit's settings from the arguments.
+fn fit_config(args: &FitArgs) -> Result<FitConfig> {
+    let defaults = FitConfig::default();
+    let budget = match (args.steps, args.seconds) {
+        (_, Some(seconds)) => FitBudget::Seconds(seconds),
+        (Some(steps), None) => FitBudget::Steps(steps),
+        (None, None) => defaults.budget,
+    };
+    let config = FitConfig {
+        size: args.size,
+        start_size: args
+            .start_size
+            .unwrap_or_else(|| defaults.start_size.min(args.size)),
+        budget,
+        rays_per_step: args.rays,
+        use_depth: !args.no_depth,
+        seed: args.seed,
+        ..defaults
+    };
+    config.validate()?;
+    Ok(config)
+}
+
+/// Fits with a progress bar (step, grid size, batch PSNR, live voxels).
+pub fn fit_with_progress(
+    dataset: &Dataset,
+    training: &[usize],
+    config: &FitConfig,
+) -> Result<FittedVolume> {
+    let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:28}] {msg}")
+            .context("progress bar template")?
+            .progress_chars("=> "),
+    );
+    let fitted = fit_volume(dataset, training, config, &mut |p| {
+        bar.set_position((p.fraction * 1000.0) as u64);
+        bar.set_message(format!(
+            "step {} grid {}^3 batch PSNR {:.2} dB, {:.0}% voxels live",
+            p.step,
+            p.size,
+            p.batch_psnr,
+            100.0 * p.live_fraction
+        ));
+    })
+    .with_context(|| format!("fitting {}", dataset_name(dataset)))?;
+    bar.finish_and_clear();
+    Ok(fitted)
+}
+
+fn dataset_name(dataset: &Dataset) -> String {
+    format!(
+        "{} views of {}x{}",
+        dataset.len(),
+        dataset.width(),
+        dataset.height()
+    )
+}
+
+/// Writes the volume, a picture (real views above, fitted below; held-out views first) and
+/// the report, plus VDB / EXR slices when asked.
+fn write_outputs(
+    args: &FitArgs,
+    dataset: &Dataset,
+    fitted: &FittedVolume,
+    config: &FitConfig,
+    held_out: &[usize],
+    report: &FitReport<'_>,
+) -> Result<()> {
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    fitted.volume.save_safetensors(&args.out)?;
+    let shown: Vec<usize> = held_out
+        .iter()
+        .copied()
+        .chain(0..dataset.len())
+        .take(3)
+        .collect();
+    let views = dataset.subset(&shown)?;
+    let level = views.level(views.width(), views.height(), &candle_core::Device::Cpu)?;
+    let rendered = render_views(&fitted.volume, &level.cameras, config)?;
+    let row = |t: &candle_core::Tensor| -> Result<Vec<candle_core::Tensor>> {
+        Ok((0..shown.len())
+            .map(|i| t.get(i))
+            .collect::<candle_core::Result<_>>()?)
+    };
+    let picture = args.out.with_extension("png");
+    singrav::picture::write_grid(&picture, &[row(&level.images)?, row(&rendered)?])?;
+    let json = args.out.with_extension("fit.json");
+    radiance_volume::io::write_bytes_atomic(&json, &serde_json::to_vec_pretty(report)?)?;
+    if let Some(vdb) = &args.vdb {
+        write_vdb(&fitted.volume, vdb, &Encoding::default())?;
+    }
+    if let Some(dir) = &args.exr_slices {
+        let stem = args
+            .out
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "volume".into());
+        write_exr_slices(&fitted.volume, dir, &stem, &Encoding::default())?;
+    }
+    println!(
+        "wrote {} (views: {}, report: {})",
+        args.out.display(),
+        picture.display(),
+        json.display()
+    );
+    Ok(())
+}
