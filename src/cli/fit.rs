@@ -46,6 +46,12 @@ pub struct FitArgs {
     /// Rays per step.
     #[arg(long, default_value_t = FitConfig::default().rays_per_step)]
     rays: usize,
+    /// Weight of total variation on raw density (0: off).
+    #[arg(long, value_name = "W", default_value_t = FitConfig::default().regularisers.tv_density)]
+    tv_density: f32,
+    /// Weight of total variation on raw colour (0: off).
+    #[arg(long, value_name = "W", default_value_t = FitConfig::default().regularisers.tv_colour)]
+    tv_colour: f32,
     /// Fit colour and opacity only, ignoring the dataset's depth.
     #[arg(long)]
     no_depth: bool,
@@ -141,6 +147,10 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
             .unwrap_or_else(|| defaults.start_size.min(args.size)),
         budget,
         rays_per_step: args.rays,
+        regularisers: singrav::fit::Regularisers {
+            tv_density: args.tv_density,
+            tv_colour: args.tv_colour,
+        },
         use_depth: !args.no_depth,
         seed: args.seed,
         ..defaults
