@@ -55,6 +55,10 @@ pub struct TrainOptions {
     /// Seed of every random draw.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Keep every N-th view (0, N, 2N, ...) out of training; `volgen eval` reports the
+    /// reconstruction on them separately (fit against 3D consistency). Recorded in the run.
+    #[arg(long, value_name = "N")]
+    pub holdout: Option<usize>,
 }
 
 impl TrainOptions {
@@ -74,6 +78,7 @@ impl TrainOptions {
         config.use_csg &= !self.no_csg;
         config.use_depth &= !self.no_depth;
         config.seed = self.seed;
+        config.holdout = self.holdout;
         config.validate()?;
         Ok(config)
     }
