@@ -476,3 +476,55 @@ fn train_refuses_missing_vgg19_weights_and_vgg19_without_swd() {
     let err = train(&["--no-swd"]);
     assert!(err.contains("--no-swd") && err.contains("--vgg19"), "{err}");
 }
+
+#[test]
+fn sample_reconstruction_writes_v_star_like_any_sample() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let (alone, beside) = (tmp.path().join("alone"), tmp.path().join("beside"));
+    let text = ok(&volgen(&[
+        "sample",
+        path(model),
+        "--count",
+        "0",
+        "--reconstruction",
+        "--vdb",
+        "--out",
+        path(&alone),
+    ]));
+    assert!(text.contains("reconstruction V*"), "{text}");
+    for file in [
+        "reconstruction.safetensors",
+        "reconstruction.png",
+        "reconstruction.vdb",
+    ] {
+        assert!(alone.join(file).is_file(), "{file} missing: {text}");
+    }
+    assert!(!alone.join("scene_0.safetensors").exists());
+
+    // V* is the generators' output for the fixed noise, whatever the seed of the samples.
+    ok(&volgen(&[
+        "sample",
+        path(model),
+        "--count",
+        "1",
+        "--seed",
+        "5",
+        "--reconstruction",
+        "--out",
+        path(&beside),
+    ]));
+    let v_star = volume_values(&alone.join("reconstruction.safetensors"));
+    assert_eq!(
+        v_star,
+        volume_values(&beside.join("reconstruction.safetensors"))
+    );
+    let (trained, _) = singrav::SinGrav::load(model, &candle_core::Device::Cpu).unwrap();
+    let want = trained
+        .to_physical(&trained.reconstruct().unwrap())
+        .unwrap();
+    let want: Vec<f32> = want.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(v_star, want);
+    let scene = volume_values(&beside.join("scene_0.safetensors"));
+    assert!(mean_abs_diff(&v_star, &scene) > 1e-4);
+}

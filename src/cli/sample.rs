@@ -1,5 +1,6 @@
-//! `volgen sample MODEL --count N --seed S --out DIR`: generate new scenes from a trained model
-//! as radiance volumes (safetensors, plus VDB / EXR slices on request) with PNG views.
+//! `volgen sample MODEL --count N --seed S --out DIR [--reconstruction]`: generate new scenes
+//! from a trained model as radiance volumes (safetensors, plus VDB / EXR slices on request) with
+//! PNG views; with `--reconstruction`, also the fixed-noise reconstruction V*.
 
 use std::path::{Path, PathBuf};
 
@@ -29,12 +30,31 @@ pub struct SampleArgs {
     /// Views rendered per scene.
     #[arg(long, default_value_t = 3)]
     views: usize,
+    /// Also write the fixed-noise reconstruction V* (the scene training fits to the dataset) as
+    /// `reconstruction.*`, in the same formats (`--count 0` writes it alone).
+    #[arg(long)]
+    reconstruction: bool,
 }
 
 /// Generates and writes the scenes.
 pub fn run(args: &SampleArgs) -> Result<()> {
     let model = load_model(&args.model)?;
     let cameras = showcase_cameras(args.views, model.render_size())?;
+    if args.reconstruction {
+        let v_star = model.reconstruction_sample(&cameras)?;
+        let files = write_scene(
+            &args.out,
+            "reconstruction",
+            &v_star.volume,
+            &v_star.views,
+            args.outputs,
+        )?;
+        println!(
+            "reconstruction V*: generated in {:.3} s -> {}",
+            v_star.generation_seconds,
+            files.display()
+        );
+    }
     sample_to_dir(
         &model,
         &cameras,

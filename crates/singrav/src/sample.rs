@@ -83,8 +83,32 @@ impl SinGrav {
     /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
+        self.sample_with(|| self.generate_random(rng), cameras)
+    }
+
+    /// The fixed-noise reconstruction V* ([`SinGrav::reconstruct`]) as a [`Sample`]: the scene
+    /// training fits to the dataset, rendered from `cameras` like any sample.
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+    /// let v_star = model.reconstruction_sample(&cameras)?;
+    /// println!("V* is {:?}", v_star.volume.dims());
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn reconstruction_sample(&self, cameras: &[Camera]) -> Result<Sample> {
+        self.sample_with(|| self.reconstruct(), cameras)
+    }
+
+    /// Times `generate` (a raw volume of the finest 3D scale) and its activation, then renders.
+    fn sample_with(
+        &self,
+        generate: impl FnOnce() -> Result<Tensor>,
+        cameras: &[Camera],
+    ) -> Result<Sample> {
         let started = Instant::now();
-        let raw = self.generate_random(rng)?;
+        let raw = generate()?;
         let volume = self.to_physical(&raw)?;
         let generation_seconds = started.elapsed().as_secs_f64();
         Ok(Sample {
