@@ -153,6 +153,9 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
         "micro",
         "--holdout",
         "3",
+        // 24-pixel final views: too small for patch_swd_mv's pyramid.
+        "--scales",
+        "2",
     ]));
     assert!(text.contains("trained model"), "{text}");
     assert_eq!(json(&held.join("config.json"))["holdout"], 3);
@@ -181,6 +184,9 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     );
     let held_psnr = report["held_out_psnr"].as_f64().unwrap();
     assert!(held_psnr > 5.0 && held_psnr < 40.0, "{held_psnr}");
+    assert_eq!(report["image_size"], 24);
+    assert!(report["patch_swd_mv"].is_null(), "{report}");
+    assert!(report["colour_swd"].as_f64().unwrap() > 0.0);
 
     // One Markdown table: a header, a rule and a row per run, in the order given.
     let lines: Vec<&str> = text.lines().filter(|l| l.starts_with('|')).collect();
@@ -202,6 +208,11 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
         ("-", "-", "-")
     );
     assert_eq!(holdout[4], format!("{held_psnr:.2}"));
+    assert_eq!(
+        (holdout[6].as_str(), plain[6] != "-"),
+        ("-", true),
+        "{text}"
+    );
     let plain_report = json(&run.join("eval.json"));
     assert_eq!(
         plain[1],

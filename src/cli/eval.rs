@@ -16,7 +16,7 @@ use singrav::checkpoint::checkpoint_path;
 use singrav::dataset::Dataset;
 use singrav::metrics::{
     colour_swd, depth_rmse, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv,
-    InceptionBlock1,
+    InceptionBlock1, PATCH_SWD_MIN_SIDE,
 };
 use singrav::SinGrav;
 
@@ -82,8 +82,9 @@ struct Evaluation {
     held_out_psnr: Option<f64>,
     held_out_ssim: Option<f64>,
     held_out_depth_rmse: Option<f64>,
-    /// Lower is closer to the real views' patch statistics.
-    patch_swd_mv: f64,
+    /// Lower is closer to the real views' patch statistics; null for views too small for its
+    /// pyramid.
+    patch_swd_mv: Option<f64>,
     /// Lower is closer to the real views' colours.
     colour_swd: f64,
     /// Mean opacity where the real views are empty; null when no real pixel is empty.
@@ -227,7 +228,9 @@ fn evaluate(
         held_out_psnr: held.as_ref().map(|h| h.psnr),
         held_out_ssim: held.as_ref().map(|h| h.ssim),
         held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
-        patch_swd_mv: patch_swd_mv(&views, &real)?,
+        patch_swd_mv: (image_size >= PATCH_SWD_MIN_SIDE)
+            .then(|| patch_swd_mv(&views, &real))
+            .transpose()?,
         colour_swd: colour_swd(&views, &real)?,
         floaters: floaters(&opacity, &coarse.opacity)?,
         diversity_mv: diversity_mv(&views, &real)?,
@@ -300,10 +303,16 @@ fn print_report(e: &Evaluation) {
         }
         _ => println!("held_out:                  none (train with --holdout N to measure)"),
     }
-    println!(
-        "patch_swd_mv:              {:.4}  (lower = patches closer to the real views')",
-        e.patch_swd_mv
-    );
+    match e.patch_swd_mv {
+        Some(p) => println!(
+            "patch_swd_mv:              {p:.4}  (lower = patches closer to the real views')"
+        ),
+        None => println!(
+            "patch_swd_mv:              not computed: views of {} pixels are below its \
+             {PATCH_SWD_MIN_SIDE}",
+            e.image_size
+        ),
+    }
     println!(
         "colour_swd:                {:.4}  (lower = colours closer to the real views')",
         e.colour_swd
@@ -348,7 +357,7 @@ fn markdown_table(evaluations: &[Evaluation]) -> String {
             number(Some(e.reconstruction_depth_rmse), 4),
             number(e.held_out_psnr, 2),
             number(e.held_out_ssim, 4),
-            number(Some(e.patch_swd_mv), 4),
+            number(e.patch_swd_mv, 4),
             number(Some(e.colour_swd), 4),
             number(e.floaters, 4),
             number(Some(e.diversity_mv), 4),

@@ -33,7 +33,7 @@ pub use diversity::diversity_mv;
 pub use floaters::floaters;
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
-pub use patch_swd::{patch_swd_mv, PATCH_SWD_DIRECTIONS, PATCH_SWD_SEED};
+pub use patch_swd::{patch_swd_mv, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED};
 pub use psnr::{mean_psnr, psnr_per_view};
 pub use sifid::{sifid, sifid_mv};
 pub use ssim::{mean_ssim, ssim_per_view};

@@ -11,6 +11,9 @@ use crate::error::Result;
 pub const PATCH_SWD_DIRECTIONS: usize = 128;
 /// Seed of the directions: fixed, so every evaluation slices along the same directions.
 pub const PATCH_SWD_SEED: u64 = 0x5eed;
+/// The smallest view side [`patch_swd_mv`] accepts: its third pyramid level (a quarter of the
+/// side, rounded up twice) must hold a 7 x 7 patch.
+pub const PATCH_SWD_MIN_SIDE: usize = 25;
 
 /// For view v of each generated scene and real view v: the sliced Wasserstein distance between
 /// the distributions of their 7 x 7 RGB patches at three levels of a Laplacian pyramid (swd-loss's
@@ -23,8 +26,8 @@ pub const PATCH_SWD_SEED: u64 = 0x5eed;
 /// colour units like [`colour_swd`](super::colour_swd); the directions are
 /// [`PATCH_SWD_DIRECTIONS`] per level, unit vectors drawn from a ChaCha8 generator seeded with
 /// [`PATCH_SWD_SEED`], the same at every call. `generated` holds one `(V, 3, H, W)` tensor per
-/// scene from the cameras of `real` `(V, 3, H, W)`; views need sides of at least 25 pixels
-/// (the third level must hold a patch).
+/// scene from the cameras of `real` `(V, 3, H, W)`; views need sides of at least
+/// [`PATCH_SWD_MIN_SIDE`] pixels.
 ///
 /// ```
 /// use candle_core::{Device, Tensor};
@@ -134,7 +137,13 @@ mod tests {
         let moved = patch_swd_mv(&[moved], &real).unwrap();
         let noisy = patch_swd_mv(&[noisy], &real).unwrap();
         assert!(2.0 * moved < noisy, "moved {moved}, noisy {noisy}");
-        let small = Tensor::zeros((1, 3, 20, 20), DType::F32, &Device::Cpu).unwrap();
+        let side = PATCH_SWD_MIN_SIDE;
+        let smallest = Tensor::zeros((1, 3, side, side), DType::F32, &Device::Cpu).unwrap();
+        assert_eq!(
+            patch_swd_mv(std::slice::from_ref(&smallest), &smallest).unwrap(),
+            0.0
+        );
+        let small = smallest.narrow(2, 0, side - 1).unwrap();
         assert!(patch_swd_mv(std::slice::from_ref(&small), &small).is_err());
     }
 }
