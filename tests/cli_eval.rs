@@ -1,5 +1,7 @@
-//! `volgen eval` on a `micro` run: Diversity-MV always, SIFID-MV with (generated) InceptionV3
-//! weights, the same numbers for the same seed, and clear errors for bad input.
+//! `volgen eval` on `micro` runs: the reconstruction's fit, the weights-free distribution
+//! numbers and Diversity-MV always, SIFID-MV with (generated) InceptionV3 weights, held-out
+//! views of a `--holdout` run, the table of several runs, the same numbers for the same seed,
+//! and clear errors for bad input.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -62,19 +64,48 @@ fn eval_reports_diversity_and_with_weights_sifid() {
     let diversity = number_after(&text, "Diversity-MV:");
     assert!(diversity.is_finite() && diversity > 0.0, "{text}");
     assert!(
-        text.contains("SIFID-MV:     not computed") && text.contains("--inception"),
+        text.contains("SIFID-MV:                  not computed") && text.contains("--inception"),
         "{text}"
     );
     let report = json(&run.join("eval.json"));
-    // The JSON has every digit, the text four decimals.
-    let exact = report["diversity_mv"].as_f64().unwrap();
-    assert!((exact - diversity).abs() <= 5e-5, "{exact} vs {diversity}");
+    // The JSON has every digit, the text two or four decimals; every number is labelled.
+    for (label, key, within) in [
+        ("Diversity-MV:", "diversity_mv", 5e-5),
+        ("reconstruction_psnr:", "reconstruction_psnr", 5e-3),
+        ("reconstruction_ssim:", "reconstruction_ssim", 5e-5),
+        (
+            "reconstruction_depth_rmse:",
+            "reconstruction_depth_rmse",
+            5e-5,
+        ),
+        ("patch_swd_mv:", "patch_swd_mv", 5e-5),
+        ("colour_swd:", "colour_swd", 5e-5),
+        ("floaters:", "floaters", 5e-5),
+    ] {
+        let exact = report[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key}: {report}"));
+        let shown = number_after(&text, label);
+        assert!((exact - shown).abs() <= within, "{key}: {exact} vs {shown}");
+    }
+    // A barely trained micro model: a poor but not absurd fit, some sky filled, all finite.
+    let psnr = report["reconstruction_psnr"].as_f64().unwrap();
+    assert!(psnr > 5.0 && psnr < 40.0, "{psnr}");
+    let ssim = report["reconstruction_ssim"].as_f64().unwrap();
+    assert!(ssim > -1.0 && ssim < 1.0, "{ssim}");
+    let floaters = report["floaters"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&floaters), "{floaters}");
+    assert!(report["patch_swd_mv"].as_f64().unwrap() > 0.0);
+    assert!(report["colour_swd"].as_f64().unwrap() > 0.0);
+    assert!(report["reconstruction_depth_rmse"].as_f64().unwrap() > 0.0);
+    assert!(text.contains("held_out:                  none"), "{text}");
+    assert!(report["held_out_psnr"].is_null() && report["holdout"].is_null());
     assert!(report["sifid_mv"].is_null());
     assert_eq!(report["image_size"], 36, "micro's final images");
-    assert_eq!(
-        report["views"],
-        serde_json::json!(["images/r_000.png", "images/r_003.png"])
-    );
+    assert_eq!(report["depth_size"], 18, "micro's last 3D rendering");
+    let first_and_fourth = serde_json::json!(["images/r_000.png", "images/r_003.png"]);
+    assert_eq!(report["views"], first_and_fourth);
+    assert_eq!(report["reconstruction_views"], first_and_fourth);
 
     let weights = tmp.path().join("inception.safetensors");
     write_random_inception(&weights);
@@ -106,4 +137,112 @@ fn eval_reports_diversity_and_with_weights_sifid() {
         "7",
     ]));
     assert!(err.contains("6 frames"), "{err}");
+}
+
+#[test]
+fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, run) = train_micro(tmp.path());
+    let held = tmp.path().join("held");
+    let text = ok(&volgen(&[
+        "train",
+        path(&data),
+        "--out",
+        path(&held),
+        "--preset",
+        "micro",
+        "--holdout",
+        "3",
+        // 24-pixel final views: too small for patch_swd_mv's pyramid.
+        "--scales",
+        "2",
+    ]));
+    assert!(text.contains("trained model"), "{text}");
+    assert_eq!(json(&held.join("config.json"))["holdout"], 3);
+
+    let text = ok(&volgen(&[
+        "eval",
+        path(&run),
+        path(&held),
+        "--dataset",
+        path(&data),
+        "--scenes",
+        "2",
+        "--views",
+        "2",
+    ]));
+    // Frames 0 and 3 of 6 are held out; the reconstruction is seen from 2 of frames 1, 2, 4, 5.
+    let report = json(&held.join("eval.json"));
+    assert_eq!(report["holdout"], 3);
+    assert_eq!(
+        report["held_out_views"],
+        serde_json::json!(["images/r_000.png", "images/r_003.png"])
+    );
+    assert_eq!(
+        report["reconstruction_views"],
+        serde_json::json!(["images/r_001.png", "images/r_004.png"])
+    );
+    let held_psnr = report["held_out_psnr"].as_f64().unwrap();
+    assert!(held_psnr > 5.0 && held_psnr < 40.0, "{held_psnr}");
+    assert_eq!(report["image_size"], 24);
+    assert!(report["patch_swd_mv"].is_null(), "{report}");
+    assert!(report["colour_swd"].as_f64().unwrap() > 0.0);
+
+    // One Markdown table: a header, a rule and a row per run, in the order given.
+    let lines: Vec<&str> = text.lines().filter(|l| l.starts_with('|')).collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    assert!(lines[0].contains("| run | PSNR (dB) | SSIM |") && lines[0].contains("floaters"));
+    let cells = |line: &str| -> Vec<String> {
+        line.trim_matches('|')
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect()
+    };
+    let (plain, holdout) = (cells(lines[2]), cells(lines[3]));
+    assert_eq!(plain.len(), 11, "{text}");
+    assert_eq!(plain[0], path(&run));
+    assert_eq!(holdout[0], path(&held));
+    // No held-out views and no SIFID-MV in the plain run: dashes.
+    assert_eq!(
+        (plain[4].as_str(), plain[5].as_str(), plain[10].as_str()),
+        ("-", "-", "-")
+    );
+    assert_eq!(holdout[4], format!("{held_psnr:.2}"));
+    assert_eq!(
+        (holdout[6].as_str(), plain[6] != "-"),
+        ("-", true),
+        "{text}"
+    );
+    let plain_report = json(&run.join("eval.json"));
+    assert_eq!(
+        plain[1],
+        format!(
+            "{:.2}",
+            plain_report["reconstruction_psnr"].as_f64().unwrap()
+        )
+    );
+
+    // --out is for one run.
+    let out = tmp.path().join("both.json");
+    let err = failure(&volgen(&[
+        "eval",
+        path(&run),
+        path(&held),
+        "--dataset",
+        path(&data),
+        "--out",
+        path(&out),
+    ]));
+    assert!(err.contains("--out"), "{err}");
+    let err = failure(&volgen(&[
+        "train",
+        path(&data),
+        "--out",
+        path(&tmp.path().join("bad")),
+        "--preset",
+        "micro",
+        "--holdout",
+        "1",
+    ]));
+    assert!(err.contains("holdout") && err.contains(">= 2"), "{err}");
 }

@@ -74,6 +74,37 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["scale_seconds"].as_array().unwrap().len(), 3);
 
+    // summary.md: the losses as a table (not raw JSON) and links to the turntables, which are
+    // 36-frame orbits at the samples' size.
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains(
+            "| scale | seconds | peak MiB | iterations | reconstruction | depth | critic | \
+             gradient penalty | adversarial | SWD |"
+        ),
+        "{md}"
+    );
+    assert!(!md.contains("{\""), "raw JSON in {md}");
+    let last = summary["final_losses"][2].clone();
+    let row = md
+        .lines()
+        .find(|l| l.starts_with("| 3 |"))
+        .unwrap_or_else(|| panic!("no scale 3 row in {md}"));
+    let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
+    // micro: 4 iterations; the upsampler has no depth term but an SWD loss.
+    assert_eq!(cells[3], "4", "{row}");
+    assert_eq!(cells[5], "-", "{row}");
+    assert_eq!(
+        cells[9],
+        format!("{:.4}", last["swd"].as_f64().unwrap()),
+        "{row}"
+    );
+    assert!(
+        md.contains("[scene_0](samples/scene_0.gif), [scene_1](samples/scene_1.gif)"),
+        "{md}"
+    );
+    assert_eq!(gif_frames(&out.join("samples/scene_1.gif")), (36, 36, 36));
+
     // Sampling the trained run again with the same seed gives the same scenes.
     let again = tmp.path().join("again");
     let text = ok(&volgen(&[
@@ -208,6 +239,19 @@ fn trained_micro() -> &'static Path {
 fn volume_values(file: &Path) -> Vec<f32> {
     let volume = RadianceVolume::load_safetensors(file).unwrap();
     volume.tensor().flatten_all().unwrap().to_vec1().unwrap()
+}
+
+/// The frame count and the first frame's width and height of an animated GIF.
+fn gif_frames(file: &Path) -> (usize, u32, u32) {
+    use image::AnimationDecoder;
+    let reader = std::io::BufReader::new(std::fs::File::open(file).unwrap());
+    let frames = image::codecs::gif::GifDecoder::new(reader)
+        .unwrap()
+        .into_frames()
+        .collect_frames()
+        .unwrap();
+    let (w, h) = frames[0].buffer().dimensions();
+    (frames.len(), w, h)
 }
 
 fn mean_abs_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -475,4 +519,118 @@ fn train_refuses_missing_vgg19_weights_and_vgg19_without_swd() {
     assert!(!run.exists(), "the run started: {err}");
     let err = train(&["--no-swd"]);
     assert!(err.contains("--no-swd") && err.contains("--vgg19"), "{err}");
+}
+
+#[test]
+fn sample_reconstruction_writes_v_star_like_any_sample() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let (alone, beside) = (tmp.path().join("alone"), tmp.path().join("beside"));
+    let text = ok(&volgen(&[
+        "sample",
+        path(model),
+        "--count",
+        "0",
+        "--reconstruction",
+        "--vdb",
+        "--turntable",
+        "5",
+        "--out",
+        path(&alone),
+    ]));
+    assert!(text.contains("reconstruction V*"), "{text}");
+    for file in [
+        "reconstruction.safetensors",
+        "reconstruction.png",
+        "reconstruction.vdb",
+        "reconstruction.gif",
+    ] {
+        assert!(alone.join(file).is_file(), "{file} missing: {text}");
+    }
+    assert!(!alone.join("scene_0.safetensors").exists());
+    // Five orbit frames at the final size (micro: 36); the PNG keeps the three showcase views.
+    assert_eq!(gif_frames(&alone.join("reconstruction.gif")), (5, 36, 36));
+    let png = image::open(alone.join("reconstruction.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (3 * 36 + 4 * 2, 36 + 2 * 2));
+
+    // V* is the generators' output for the fixed noise, whatever the seed of the samples.
+    ok(&volgen(&[
+        "sample",
+        path(model),
+        "--count",
+        "1",
+        "--seed",
+        "5",
+        "--reconstruction",
+        "--out",
+        path(&beside),
+    ]));
+    let v_star = volume_values(&alone.join("reconstruction.safetensors"));
+    assert_eq!(
+        v_star,
+        volume_values(&beside.join("reconstruction.safetensors"))
+    );
+    let (trained, _) = singrav::SinGrav::load(model, &candle_core::Device::Cpu).unwrap();
+    let want = trained
+        .to_physical(&trained.reconstruct().unwrap())
+        .unwrap();
+    let want: Vec<f32> = want.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(v_star, want);
+    let scene = volume_values(&beside.join("scene_0.safetensors"));
+    assert!(mean_abs_diff(&v_star, &scene) > 1e-4);
+    assert!(!beside.join("scene_0.gif").exists(), "no turntable asked");
+    let err = failure(&volgen(&[
+        "sample",
+        path(model),
+        "--turntable",
+        "0",
+        "--out",
+        path(&beside),
+    ]));
+    assert!(err.contains("--turntable"), "{err}");
+}
+
+#[test]
+fn animate_gif_holds_every_frame_as_its_png_shows_it() {
+    use image::AnimationDecoder;
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("anim");
+    let text = ok(&volgen(&[
+        "animate",
+        path(model),
+        "--frames",
+        "3",
+        "--seed",
+        "2",
+        "--gif",
+        "--out",
+        path(&out),
+    ]));
+    assert!(text.contains("animation.gif"), "{text}");
+    let reader = std::io::BufReader::new(std::fs::File::open(out.join("animation.gif")).unwrap());
+    let frames = image::codecs::gif::GifDecoder::new(reader)
+        .unwrap()
+        .into_frames()
+        .collect_frames()
+        .unwrap();
+    assert_eq!(frames.len(), 3);
+    for (t, frame) in frames.iter().enumerate() {
+        // The PNG is the same view inside a 2-pixel white border; the GIF's palette is within
+        // a few levels of it.
+        let png = image::open(out.join(format!("frame_{t:04}.png")))
+            .unwrap()
+            .to_rgb8();
+        let gif = frame.buffer();
+        assert_eq!(gif.dimensions(), (png.width() - 4, png.height() - 4));
+        let mut total = 0u64;
+        for (x, y, p) in gif.enumerate_pixels() {
+            let q = png.get_pixel(x + 2, y + 2).0;
+            total += (0..3)
+                .map(|k| u64::from(p.0[k].abs_diff(q[k])))
+                .sum::<u64>();
+        }
+        let mean = total as f64 / f64::from(3 * gif.width() * gif.height());
+        assert!(mean < 4.0, "frame {t}: mean difference {mean} levels");
+    }
 }

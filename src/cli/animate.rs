@@ -1,6 +1,7 @@
-//! `volgen animate MODEL --frames N --seed S --out DIR`: the paper's animation, a smoothed random
-//! walk on the noise of the finer scales, written frame by frame as physical volumes
-//! (`frame_0000.safetensors`, VDB / EXR on request) and a PNG from one fixed camera.
+//! `volgen animate MODEL --frames N --seed S --out DIR [--gif]`: the paper's animation, a
+//! smoothed random walk on the noise of the finer scales, written frame by frame as physical
+//! volumes (`frame_0000.safetensors`, VDB / EXR on request) and a PNG from one fixed camera, and
+//! with `--gif` as one animated GIF of those PNG views.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -38,7 +39,13 @@ pub struct AnimateArgs {
     first_moving_scale: usize,
     #[command(flatten)]
     outputs: Outputs,
+    /// Also write the frames' views as one looping animated GIF, `animation.gif`.
+    #[arg(long)]
+    gif: bool,
 }
+
+/// How long an animation frame is shown (12.5 frames per second).
+const ANIMATION_FRAME_MS: u32 = 80;
 
 /// Generates and writes the frames, printing each frame's generation time.
 pub fn run(args: &AnimateArgs) -> Result<()> {
@@ -57,6 +64,7 @@ pub fn run(args: &AnimateArgs) -> Result<()> {
     let mut animation = model
         .animation(walk, rng)
         .context("setting up the animation")?;
+    let mut gif_frames = Vec::new();
     for t in 0..args.frames {
         let started = Instant::now();
         let raw = animation.next_frame()?;
@@ -74,6 +82,14 @@ pub fn run(args: &AnimateArgs) -> Result<()> {
             "frame {t}: generated in {seconds:.3} s -> {}",
             files.display()
         );
+        if args.gif {
+            gif_frames.push(views.get(0)?);
+        }
+    }
+    if args.gif {
+        let path = args.out.join("animation.gif");
+        singrav::picture::write_gif(&path, &gif_frames, ANIMATION_FRAME_MS)?;
+        println!("animation -> {}", path.display());
     }
     Ok(())
 }

@@ -17,7 +17,7 @@ use singrav::train::RunOptions;
 use singrav::SinGrav;
 
 use super::model_io::Outputs;
-use super::sample::sample_to_dir;
+use super::sample::{sample_to_dir, Views};
 use super::train::{load_dataset, train_with_progress, TrainOptions};
 
 /// Arguments of `volgen demo`.
@@ -42,6 +42,20 @@ pub struct DemoArgs {
     train: TrainOptions,
 }
 
+/// Frames of each sample's turntable GIF.
+const DEMO_TURNTABLE_FRAMES: usize = 36;
+
+/// The losses of the last logged iteration of a scale, as the table shows them (the log's
+/// names).
+const LOSS_COLUMNS: [(&str, &str); 6] = [
+    ("color", "reconstruction"),
+    ("depth", "depth"),
+    ("critic", "critic"),
+    ("penalty", "gradient penalty"),
+    ("adversarial", "adversarial"),
+    ("swd", "SWD"),
+];
+
 /// The summary written to `summary.json` (and, readably, `summary.md`).
 #[derive(Debug, Serialize)]
 struct Summary {
@@ -59,6 +73,8 @@ struct Summary {
     dataset: PathBuf,
     model: PathBuf,
     samples: PathBuf,
+    /// An animated camera orbit per sample.
+    turntables: Vec<PathBuf>,
     scale_pictures: Vec<PathBuf>,
 }
 
@@ -120,9 +136,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         vdb: cfg!(feature = "vdb"),
         exr_slices: false,
     };
+    let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let samples = sample_to_dir(
         &model,
-        &cameras,
+        &views,
         args.count,
         args.train.seed,
         &samples_dir,
@@ -149,6 +166,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         overview: overview.clone(),
         dataset: dataset_dir,
         model: run_dir.clone(),
+        turntables: (0..samples.len())
+            .map(|i| samples_dir.join(format!("scene_{i}.gif")))
+            .collect(),
         samples: samples_dir,
         scale_pictures: (1..=config.scales())
             .map(|n| run_dir.join("samples").join(format!("scale_{n}.png")))
@@ -242,26 +262,18 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
         summary.training_seconds
     )?;
     writeln!(md, "- overview: {}", summary.overview.display())?;
-    writeln!(md, "- generated volumes: {}\n", summary.samples.display())?;
-    writeln!(
-        md,
-        "| scale | seconds | peak MiB | last losses |\n|---|---|---|---|"
-    )?;
-    for (i, seconds) in summary.scale_seconds.iter().enumerate() {
-        let mib = summary.scale_peak_mib.get(i).copied().flatten();
-        let losses = summary
-            .final_losses
-            .get(i)
-            .map(ToString::to_string)
-            .unwrap_or_default();
-        writeln!(
-            md,
-            "| {} | {seconds:.0} | {} | `{losses}` |",
-            i + 1,
-            mib.map(|m| format!("{m:.0}"))
-                .unwrap_or_else(|| "n/a".into())
-        )?;
-    }
+    writeln!(md, "- generated volumes: {}", summary.samples.display())?;
+    let links: Vec<String> = summary
+        .turntables
+        .iter()
+        .map(|gif| {
+            let shown = gif.strip_prefix(dir).unwrap_or(gif).display().to_string();
+            let name = gif.file_stem().unwrap_or_default().to_string_lossy();
+            format!("[{name}]({shown})")
+        })
+        .collect();
+    writeln!(md, "- turntables (animated GIF): {}\n", links.join(", "))?;
+    md.push_str(&loss_table(summary));
     let times: Vec<String> = summary
         .generation_seconds
         .iter()
@@ -275,6 +287,38 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
         )?;
     }
     write_text(&dir.join("summary.md"), &md)
+}
+
+/// The time, memory and last logged losses of every scale as a Markdown table, "-" where a
+/// loss is not computed at that scale.
+fn loss_table(summary: &Summary) -> String {
+    let mut table = String::from("| scale | seconds | peak MiB | iterations |");
+    for (_, title) in LOSS_COLUMNS {
+        table.push_str(&format!(" {title} |"));
+    }
+    table.push_str(&format!("\n|{}\n", "---|".repeat(4 + LOSS_COLUMNS.len())));
+    for (i, seconds) in summary.scale_seconds.iter().enumerate() {
+        let mib = summary.scale_peak_mib.get(i).copied().flatten();
+        let last = summary.final_losses.get(i);
+        let field = |key: &str| last.and_then(|l| l.get(key));
+        // The log's iteration counts from 0.
+        let iterations = field("iteration")
+            .and_then(serde_json::Value::as_u64)
+            .map_or("-".into(), |it| (it + 1).to_string());
+        table.push_str(&format!(
+            "| {} | {seconds:.0} | {} | {iterations} |",
+            i + 1,
+            mib.map_or("n/a".into(), |m| format!("{m:.0}")),
+        ));
+        for (key, _) in LOSS_COLUMNS {
+            let cell = field(key)
+                .and_then(serde_json::Value::as_f64)
+                .map_or("-".into(), |v| format!("{v:.4}"));
+            table.push_str(&format!(" {cell} |"));
+        }
+        table.push('\n');
+    }
+    table
 }
 
 /// Writes a text file atomically.

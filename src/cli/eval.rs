@@ -1,18 +1,24 @@
-//! `volgen eval MODEL --dataset DIR [--scenes N] [--views V] [--seed S] [--inception FILE]`:
-//! the paper's metrics of a trained model. Generates scenes, renders each from cameras of the
-//! training dataset, and compares the renderings with the dataset's images from the same
-//! cameras: Diversity-MV always, SIFID-MV when InceptionV3 weights are given.
+//! `volgen eval RUN... --dataset DIR [--scenes N] [--views V] [--seed S] [--inception FILE]`:
+//! the quality numbers of trained models. Renders the fixed-noise reconstruction V* and
+//! generated scenes from cameras of the training dataset and compares them with the dataset's
+//! images from the same cameras (docs/metrics.md defines every number). With several runs, a
+//! Markdown table compares them, a row per run.
 
 use std::path::{Path, PathBuf};
 
 use super::model_io::load_model;
 use super::train::{device, load_dataset};
 use anyhow::{ensure, Context, Result};
-use candle_core::Tensor;
+use candle_core::{Device, Tensor};
 use rand::SeedableRng;
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
-use singrav::metrics::{diversity_mv, sifid_mv, InceptionBlock1};
+use singrav::dataset::Dataset;
+use singrav::metrics::{
+    colour_swd, depth_rmse, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv,
+    InceptionBlock1, PATCH_SWD_MIN_SIDE,
+};
+use singrav::SinGrav;
 
 /// Arguments of `volgen eval`.
 #[derive(Debug, clap::Args)]
@@ -20,46 +26,82 @@ use singrav::metrics::{diversity_mv, sifid_mv, InceptionBlock1};
     (--scenes 50 --views 40); the defaults are small enough to run in seconds on the tiny \
     preset. docs/metrics.md explains the numbers and how to convert InceptionV3's weights.")]
 pub struct EvalArgs {
-    /// A trained model: a run directory or its checkpoint.safetensors.
-    model: PathBuf,
-    /// The dataset the model was trained on (a transforms.json or its directory): its images
+    /// Trained models: run directories or their checkpoint.safetensors. With several, a
+    /// Markdown table compares them (each still writes eval.json in its run directory).
+    #[arg(required = true, value_name = "RUN")]
+    models: Vec<PathBuf>,
+    /// The dataset the models were trained on (a transforms.json or its directory): its images
     /// are the real views. Required because a run does not record where its dataset was.
     #[arg(long, value_name = "DIR")]
     dataset: PathBuf,
     /// Scenes to generate (at least 2; the paper: 50).
     #[arg(long, default_value_t = 8)]
     scenes: usize,
-    /// Dataset views to compare, evenly spaced over its frames (the paper: 40).
+    /// Dataset views to compare, evenly spaced over its frames (the paper: 40); as many of the
+    /// training and of the held-out frames for the reconstruction.
     #[arg(long, default_value_t = 4)]
     views: usize,
     /// Seed of the noise; the same seed gives the scenes `volgen sample --seed` gives.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// InceptionV3 weights (torchvision's names, safetensors) for SIFID-MV; without them only
-    /// Diversity-MV is computed.
+    /// InceptionV3 weights (torchvision's names, safetensors) for SIFID-MV; without them
+    /// SIFID-MV is not computed.
     #[arg(long, value_name = "FILE")]
     inception: Option<PathBuf>,
-    /// Where to write the numbers as JSON (default: eval.json in the run directory).
+    /// Where to write the numbers as JSON (default: eval.json in the run directory); only
+    /// with a single run.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
 }
 
-/// What `eval.json` holds.
+/// What `eval.json` holds. Infinite PSNRs (exact reconstructions) are written as null.
 #[derive(Debug, Serialize)]
 struct Evaluation {
     model: PathBuf,
     dataset: PathBuf,
     scenes: usize,
     seed: u64,
-    /// The dataset frames (their `file_path`) the scenes were seen from.
+    /// The dataset frames (their `file_path`) the generated scenes were seen from.
     views: Vec<String>,
-    /// Edge of the compared images in pixels.
+    /// Edge of the compared colour images in pixels (the model's final size).
     image_size: usize,
+    /// Edge of the depth and opacity maps (the last 3D scale's rendering size).
+    depth_size: usize,
+    /// The run's `--holdout N`, if it had one.
+    holdout: Option<usize>,
+    /// The training frames the reconstruction was seen from.
+    reconstruction_views: Vec<String>,
+    /// dB, higher is better.
+    reconstruction_psnr: f64,
+    /// 1 is a perfect reconstruction.
+    reconstruction_ssim: f64,
+    /// World units, lower is better.
+    reconstruction_depth_rmse: f64,
+    /// The held-out frames (empty without a holdout).
+    held_out_views: Vec<String>,
+    held_out_psnr: Option<f64>,
+    held_out_ssim: Option<f64>,
+    held_out_depth_rmse: Option<f64>,
+    /// Lower is closer to the real views' patch statistics; null for views too small for its
+    /// pyramid.
+    patch_swd_mv: Option<f64>,
+    /// Lower is closer to the real views' colours.
+    colour_swd: f64,
+    /// Mean opacity where the real views are empty; null when no real pixel is empty.
+    floaters: Option<f64>,
     /// Higher is more varied; 0 when every scene is the same.
     diversity_mv: f64,
     /// Lower is closer to the real views' statistics; null without InceptionV3 weights.
     sifid_mv: Option<f64>,
     inception: Option<PathBuf>,
+}
+
+/// How closely V* reproduces a set of real views.
+struct Fit {
+    views: Vec<String>,
+    psnr: f64,
+    ssim: f64,
+    depth_rmse: f64,
 }
 
 /// Evaluates as the arguments say.
@@ -69,6 +111,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         "--scenes must be at least 2: Diversity-MV is a spread over scenes"
     );
     ensure!(args.views >= 1, "--views must be at least 1");
+    ensure!(
+        args.out.is_none() || args.models.len() == 1,
+        "--out names one file, for a single run; with several runs each writes eval.json in \
+         its run directory"
+    );
     let device = device()?;
     // Weights first: a wrong path should fail before minutes of generation.
     let block = args
@@ -76,7 +123,39 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .as_ref()
         .map(|path| InceptionBlock1::from_safetensors(path, &device))
         .transpose()?;
-    let model = load_model(&args.model)?;
+    let mut evaluations = Vec::with_capacity(args.models.len());
+    for model in &args.models {
+        let evaluation = evaluate(model, args, block.as_ref(), &device)
+            .with_context(|| format!("evaluating {}", model.display()))?;
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| run_dir(model).join("eval.json"));
+        radiance_volume::io::write_bytes_atomic(
+            &out,
+            format!("{}\n", serde_json::to_string_pretty(&evaluation)?).as_bytes(),
+        )
+        .with_context(|| format!("writing {}", out.display()))?;
+        if args.models.len() == 1 {
+            print_report(&evaluation);
+        }
+        eprintln!("wrote {}", out.display());
+        evaluations.push(evaluation);
+    }
+    if evaluations.len() > 1 {
+        print!("{}", markdown_table(&evaluations));
+    }
+    Ok(())
+}
+
+/// Every number of one model.
+fn evaluate(
+    model_path: &Path,
+    args: &EvalArgs,
+    block: Option<&InceptionBlock1>,
+    device: &Device,
+) -> Result<Evaluation> {
+    let model = load_model(model_path)?;
     let dataset = load_dataset(&args.dataset, model.config())?;
     ensure!(
         args.views <= dataset.len(),
@@ -85,63 +164,212 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         dataset.len(),
         args.dataset.display()
     );
-    let frames: Vec<usize> = (0..args.views)
-        .map(|i| i * dataset.len() / args.views)
-        .collect();
-    let chosen = dataset.subset(&frames)?;
-    let size = model.render_size();
-    let cameras = chosen.level(size, size, &device)?.cameras;
+    let holdout = model.config().holdout;
+    let (training, held_out) = match holdout {
+        Some(every) => dataset
+            .holdout_split(every)
+            .with_context(|| format!("the run held out every {every}-th view"))?,
+        None => ((0..dataset.len()).collect(), Vec::new()),
+    };
 
+    let v_star = model.reconstruct()?;
+    let reconstruction = fit(
+        &model,
+        &v_star,
+        &dataset,
+        &spread(&training, args.views),
+        device,
+    )?;
+    let held = (!held_out.is_empty())
+        .then(|| {
+            fit(
+                &model,
+                &v_star,
+                &dataset,
+                &spread(&held_out, args.views),
+                device,
+            )
+        })
+        .transpose()?;
+
+    let all: Vec<usize> = (0..dataset.len()).collect();
+    let chosen = dataset.subset(&spread(&all, args.views))?;
+    let size = model.render_size();
+    let coarse = chosen.level(size, size, device)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
-    let mut generated: Vec<Tensor> = Vec::with_capacity(args.scenes);
+    let mut views: Vec<Tensor> = Vec::with_capacity(args.scenes);
+    let mut opacity: Vec<Tensor> = Vec::with_capacity(args.scenes);
     for i in 0..args.scenes {
-        generated.push(model.sample(&mut rng, &cameras)?.views);
+        // As `SinGrav::sample` draws them: scene i here is scene i of `volgen sample`.
+        let raw = model.generate_random(&mut rng)?;
+        let maps = model.render_maps(&raw, &coarse.cameras)?;
+        views.push(maps.rgb);
+        opacity.push(maps.opacity);
         eprintln!("scene {}/{} rendered", i + 1, args.scenes);
     }
     // The upsampler, when trained, doubles the renderings: compare at the size they came out.
-    let image_size = generated[0].dim(3)?;
-    let real = chosen.level(image_size, image_size, &device)?.images;
+    let image_size = views[0].dim(3)?;
+    let real = chosen.level(image_size, image_size, device)?.images;
 
-    let diversity = diversity_mv(&generated, &real)?;
-    let sifid = block
-        .as_ref()
-        .map(|b| sifid_mv(&generated, &real, b))
-        .transpose()?;
-    println!(
-        "{} scenes x {} views at {image_size}x{image_size} (seed {})",
-        args.scenes, args.views, args.seed
-    );
-    println!("Diversity-MV: {diversity:.4}  (higher = more varied scenes)");
-    match sifid {
-        Some(s) => println!("SIFID-MV:     {s:.4}  (lower = closer to the real views)"),
-        None => println!(
-            "SIFID-MV:     not computed: it needs InceptionV3 weights (--inception \
-             FILE.safetensors); docs/metrics.md shows how to convert torchvision's"
-        ),
-    }
-
-    let evaluation = Evaluation {
-        model: args.model.clone(),
+    Ok(Evaluation {
+        model: model_path.to_path_buf(),
         dataset: args.dataset.clone(),
         scenes: args.scenes,
         seed: args.seed,
         views: chosen.frame_names().to_vec(),
         image_size,
-        diversity_mv: diversity,
-        sifid_mv: sifid,
+        depth_size: size,
+        holdout,
+        reconstruction_views: reconstruction.views,
+        reconstruction_psnr: reconstruction.psnr,
+        reconstruction_ssim: reconstruction.ssim,
+        reconstruction_depth_rmse: reconstruction.depth_rmse,
+        held_out_views: held.as_ref().map(|h| h.views.clone()).unwrap_or_default(),
+        held_out_psnr: held.as_ref().map(|h| h.psnr),
+        held_out_ssim: held.as_ref().map(|h| h.ssim),
+        held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
+        patch_swd_mv: (image_size >= PATCH_SWD_MIN_SIDE)
+            .then(|| patch_swd_mv(&views, &real))
+            .transpose()?,
+        colour_swd: colour_swd(&views, &real)?,
+        floaters: floaters(&opacity, &coarse.opacity)?,
+        diversity_mv: diversity_mv(&views, &real)?,
+        sifid_mv: block.map(|b| sifid_mv(&views, &real, b)).transpose()?,
         inception: args.inception.clone(),
+    })
+}
+
+/// V* against the dataset's `frames`: colour at the final size, depth at the 3D pyramid's.
+fn fit(
+    model: &SinGrav,
+    v_star: &Tensor,
+    dataset: &Dataset,
+    frames: &[usize],
+    device: &Device,
+) -> Result<Fit> {
+    let chosen = dataset.subset(frames)?;
+    let size = model.render_size();
+    let coarse = chosen.level(size, size, device)?;
+    let maps = model.render_maps(v_star, &coarse.cameras)?;
+    let image_size = maps.rgb.dim(3)?;
+    let real = chosen.level(image_size, image_size, device)?.images;
+    Ok(Fit {
+        views: chosen.frame_names().to_vec(),
+        psnr: mean_psnr(&maps.rgb, &real)?,
+        ssim: mean_ssim(&maps.rgb, &real)?,
+        depth_rmse: depth_rmse(&maps.depth, &coarse.depths)?,
+    })
+}
+
+/// `count` of `indices` evenly spaced (all of them when there are fewer).
+fn spread(indices: &[usize], count: usize) -> Vec<usize> {
+    let count = count.min(indices.len());
+    (0..count)
+        .map(|i| indices[i * indices.len() / count])
+        .collect()
+}
+
+/// The labelled lines of one model's numbers.
+fn print_report(e: &Evaluation) {
+    println!(
+        "{} scenes x {} views at {}x{} (seed {})",
+        e.scenes,
+        e.views.len(),
+        e.image_size,
+        e.image_size,
+        e.seed
+    );
+    println!(
+        "reconstruction_psnr:       {:.2} dB  (V* on {} training views; higher = closer)",
+        e.reconstruction_psnr,
+        e.reconstruction_views.len()
+    );
+    println!(
+        "reconstruction_ssim:       {:.4}  (1 = identical)",
+        e.reconstruction_ssim
+    );
+    println!(
+        "reconstruction_depth_rmse: {:.4}  (world units; lower = closer)",
+        e.reconstruction_depth_rmse
+    );
+    match (e.held_out_psnr, e.held_out_ssim, e.held_out_depth_rmse) {
+        (Some(psnr), Some(ssim), Some(depth)) => {
+            println!(
+                "held_out_psnr:             {psnr:.2} dB  (V* on {} held-out views)",
+                e.held_out_views.len()
+            );
+            println!("held_out_ssim:             {ssim:.4}");
+            println!("held_out_depth_rmse:       {depth:.4}");
+        }
+        _ => println!("held_out:                  none (train with --holdout N to measure)"),
+    }
+    match e.patch_swd_mv {
+        Some(p) => println!(
+            "patch_swd_mv:              {p:.4}  (lower = patches closer to the real views')"
+        ),
+        None => println!(
+            "patch_swd_mv:              not computed: views of {} pixels are below its \
+             {PATCH_SWD_MIN_SIDE}",
+            e.image_size
+        ),
+    }
+    println!(
+        "colour_swd:                {:.4}  (lower = colours closer to the real views')",
+        e.colour_swd
+    );
+    match e.floaters {
+        Some(f) => println!(
+            "floaters:                  {f:.4}  (mean opacity where the real views are empty)"
+        ),
+        None => println!("floaters:                  not computed: no real pixel is empty"),
+    }
+    println!(
+        "Diversity-MV:              {:.4}  (higher = more varied scenes)",
+        e.diversity_mv
+    );
+    match e.sifid_mv {
+        Some(s) => {
+            println!("SIFID-MV:                  {s:.4}  (lower = closer to the real views)")
+        }
+        None => println!(
+            "SIFID-MV:                  not computed: it needs InceptionV3 weights (--inception \
+             FILE.safetensors); docs/metrics.md shows how to convert torchvision's"
+        ),
+    }
+}
+
+/// One Markdown table, a row per model (as the paper's Table 1), "-" where a number was not
+/// computed.
+fn markdown_table(evaluations: &[Evaluation]) -> String {
+    let number = |v: Option<f64>, digits: usize| match v {
+        Some(v) => format!("{v:.digits$}"),
+        None => "-".to_string(),
     };
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| run_dir(&args.model).join("eval.json"));
-    radiance_volume::io::write_bytes_atomic(
-        &out,
-        format!("{}\n", serde_json::to_string_pretty(&evaluation)?).as_bytes(),
-    )
-    .with_context(|| format!("writing {}", out.display()))?;
-    println!("wrote {}", out.display());
-    Ok(())
+    let mut table = String::from(
+        "| run | PSNR (dB) | SSIM | depth RMSE | held-out PSNR | held-out SSIM | patch SWD-MV | \
+         colour SWD | floaters | Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for e in evaluations {
+        let cells = [
+            number(Some(e.reconstruction_psnr), 2),
+            number(Some(e.reconstruction_ssim), 4),
+            number(Some(e.reconstruction_depth_rmse), 4),
+            number(e.held_out_psnr, 2),
+            number(e.held_out_ssim, 4),
+            number(e.patch_swd_mv, 4),
+            number(Some(e.colour_swd), 4),
+            number(e.floaters, 4),
+            number(Some(e.diversity_mv), 4),
+            number(e.sifid_mv, 4),
+        ];
+        table.push_str(&format!(
+            "| {} | {} |\n",
+            e.model.display(),
+            cells.join(" | ")
+        ));
+    }
+    table
 }
 
 /// The run directory of `model` (the directory itself, or the one holding the checkpoint).

@@ -1,12 +1,15 @@
-//! `volgen sample MODEL --count N --seed S --out DIR`: generate new scenes from a trained model
-//! as radiance volumes (safetensors, plus VDB / EXR slices on request) with PNG views.
+//! `volgen sample MODEL --count N --seed S --out DIR [--reconstruction] [--turntable F]`:
+//! generate new scenes from a trained model as radiance volumes (safetensors, plus VDB / EXR
+//! slices on request) with PNG views; with `--reconstruction`, also the fixed-noise
+//! reconstruction V*; with `--turntable F`, an animated GIF per scene, a camera orbit of F frames.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{ensure, Result};
 use rand::SeedableRng;
 use singrav::sample::{showcase_cameras, Sample};
 use singrav::SinGrav;
+use volrender::Camera;
 
 use super::model_io::{load_model, write_scene, Outputs};
 
@@ -29,15 +32,45 @@ pub struct SampleArgs {
     /// Views rendered per scene.
     #[arg(long, default_value_t = 3)]
     views: usize,
+    /// Also write the fixed-noise reconstruction V* (the scene training fits to the dataset) as
+    /// `reconstruction.*`, in the same formats (`--count 0` writes it alone).
+    #[arg(long)]
+    reconstruction: bool,
+    /// Also write each scene as an animated GIF (`scene_i.gif`): a full camera orbit at the
+    /// showcase views' elevation, in this many frames.
+    #[arg(long, value_name = "FRAMES")]
+    turntable: Option<usize>,
 }
+
+/// How long a turntable frame is shown: 36 frames make a 2.9 s orbit.
+const TURNTABLE_FRAME_MS: u32 = 80;
 
 /// Generates and writes the scenes.
 pub fn run(args: &SampleArgs) -> Result<()> {
+    ensure!(
+        args.turntable != Some(0),
+        "--turntable: expected at least 1 frame, got 0"
+    );
     let model = load_model(&args.model)?;
-    let cameras = showcase_cameras(args.views, model.render_size())?;
+    let views = Views::new(&model, args.views, args.turntable)?;
+    if args.reconstruction {
+        let mut v_star = model.reconstruction_sample(&views.cameras)?;
+        let files = write_sample(
+            &args.out,
+            "reconstruction",
+            &mut v_star,
+            &views,
+            args.outputs,
+        )?;
+        println!(
+            "reconstruction V*: generated in {:.3} s -> {}",
+            v_star.generation_seconds,
+            files.display()
+        );
+    }
     sample_to_dir(
         &model,
-        &cameras,
+        &views,
         args.count,
         args.seed,
         &args.out,
@@ -46,11 +79,47 @@ pub fn run(args: &SampleArgs) -> Result<()> {
     Ok(())
 }
 
-/// Generates `count` scenes seen from `cameras` into `dir` (`scene_i.safetensors`,
-/// `scene_i.png`, and VDB / EXR when asked), printing each scene's generation time.
+/// The cameras every scene is rendered from: the views shown in its PNG, then the turntable's
+/// orbit (one render call for both).
+pub struct Views {
+    cameras: Vec<Camera>,
+    shown: usize,
+}
+
+impl Views {
+    /// `shown` cameras for the PNG (as given) and, with `turntable`, that many orbit frames.
+    pub fn with_cameras(
+        model: &SinGrav,
+        shown: Vec<Camera>,
+        turntable: Option<usize>,
+    ) -> Result<Self> {
+        let count = shown.len();
+        let mut cameras = shown;
+        if let Some(frames) = turntable {
+            cameras.extend(showcase_cameras(frames, model.render_size())?);
+        }
+        Ok(Self {
+            cameras,
+            shown: count,
+        })
+    }
+
+    /// `shown` showcase cameras and, with `turntable`, that many orbit frames.
+    fn new(model: &SinGrav, shown: usize, turntable: Option<usize>) -> Result<Self> {
+        Self::with_cameras(
+            model,
+            showcase_cameras(shown, model.render_size())?,
+            turntable,
+        )
+    }
+}
+
+/// Generates `count` scenes seen from `views` into `dir` (`scene_i.safetensors`, `scene_i.png`,
+/// `scene_i.gif` with a turntable, and VDB / EXR when asked), printing each scene's generation
+/// time. The samples returned hold the shown views only.
 pub fn sample_to_dir(
     model: &SinGrav,
-    cameras: &[volrender::Camera],
+    views: &Views,
     count: usize,
     seed: u64,
     dir: &Path,
@@ -59,14 +128,8 @@ pub fn sample_to_dir(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut samples = Vec::with_capacity(count);
     for i in 0..count {
-        let sample = model.sample(&mut rng, cameras)?;
-        let files = write_scene(
-            dir,
-            &format!("scene_{i}"),
-            &sample.volume,
-            &sample.views,
-            outputs,
-        )?;
+        let mut sample = model.sample(&mut rng, &views.cameras)?;
+        let files = write_sample(dir, &format!("scene_{i}"), &mut sample, views, outputs)?;
         println!(
             "scene {i}: generated in {:.3} s -> {}",
             sample.generation_seconds,
@@ -75,4 +138,28 @@ pub fn sample_to_dir(
         samples.push(sample);
     }
     Ok(samples)
+}
+
+/// Writes a scene rendered from `views.cameras`: the shown views as its PNG (they stay in
+/// `sample.views`), the orbit's frames, if any, as `{stem}.gif`.
+fn write_sample(
+    dir: &Path,
+    stem: &str,
+    sample: &mut Sample,
+    views: &Views,
+    outputs: Outputs,
+) -> Result<PathBuf> {
+    let frames = (views.shown..views.cameras.len())
+        .map(|v| sample.views.get(v))
+        .collect::<candle_core::Result<Vec<_>>>()?;
+    sample.views = sample.views.narrow(0, 0, views.shown)?;
+    let files = write_scene(dir, stem, &sample.volume, &sample.views, outputs)?;
+    if !frames.is_empty() {
+        singrav::picture::write_gif(
+            &dir.join(format!("{stem}.gif")),
+            &frames,
+            TURNTABLE_FRAME_MS,
+        )?;
+    }
+    Ok(files)
 }

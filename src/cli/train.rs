@@ -69,6 +69,10 @@ pub struct TrainOptions {
     /// Weight of the fitted-volume comparison (with --fitted or --fit).
     #[arg(long, value_name = "W", default_value_t = DEFAULT_LAMBDA_FITTED)]
     pub lambda_fitted: f64,
+    /// Keep every N-th view (0, N, 2N, ...) out of training; `volgen eval` reports the
+    /// reconstruction on them separately (fit against 3D consistency). Recorded in the run.
+    #[arg(long, value_name = "N")]
+    pub holdout: Option<usize>,
 }
 
 /// The fitted-volume weight `--fitted` and `--fit` use unless told otherwise.
@@ -94,6 +98,7 @@ impl TrainOptions {
         if self.fitted.is_some() || self.fit {
             config.lambda_fitted = self.lambda_fitted;
         }
+        config.holdout = self.holdout;
         config.validate()?;
         Ok(config)
     }
@@ -120,7 +125,7 @@ impl TrainOptions {
     }
 }
 
-/// Fits `dataset` at twice the finest 3D scale's edge into `run_dir/fitted.safetensors`, or
+/// Fits `dataset`'s training views at twice the finest 3D scale's edge into `run_dir/fitted.safetensors`, or
 /// reuses the file there when resuming.
 fn fit_for_training(
     config: &TrainConfig,
@@ -145,8 +150,12 @@ fn fit_for_training(
         budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
         ..defaults
     };
-    let all: Vec<usize> = (0..dataset.len()).collect();
-    let fitted = super::fit::fit_with_progress(dataset, &all, &fit_config)?;
+    // The fit sees only the views training sees, so held-out views stay held out.
+    let training = match config.holdout {
+        Some(every) => dataset.holdout_split(every)?.0,
+        None => (0..dataset.len()).collect(),
+    };
+    let fitted = super::fit::fit_with_progress(dataset, &training, &fit_config)?;
     std::fs::create_dir_all(run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
     fitted.volume.save_safetensors(&path)?;
     eprintln!(

@@ -91,6 +91,11 @@ pub struct TrainConfig {
     pub checkpoint_iterations: usize,
     /// Seed of every random draw: weights, noises, views, penalties, projections.
     pub seed: u64,
+    /// Every N-th dataset view (0, N, 2N, ...) is kept out of training, for evaluating fit
+    /// against 3D consistency (see [`crate::dataset::Dataset::holdout_split`]); `None` trains
+    /// on every view. Absent from checkpoints made before it existed, which used every view.
+    #[serde(default)]
+    pub holdout: Option<usize>,
 }
 
 /// The features of the last scale's sliced Wasserstein texture loss.
@@ -208,6 +213,7 @@ impl TrainConfig {
             checkpoint_seconds: 300,
             checkpoint_iterations: 0,
             seed: 0,
+            holdout: None,
         };
         let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
             preset: preset.into(),
@@ -335,6 +341,12 @@ impl TrainConfig {
                     self.image_sizes.len(),
                     self.samples.len()
                 ),
+            ));
+        }
+        if let Some(every) = self.holdout.filter(|&every| every < 2) {
+            return Err(invalid(
+                "holdout",
+                format!("expected every N-th view held out with N >= 2, got {every}"),
             ));
         }
         let field = 2 * self.layers + 1;

@@ -8,7 +8,8 @@
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
 //! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
 //! - [`sample`]: new scenes from a trained model; [`applications`]: editing, harmonisation and
-//!   animation; [`metrics`]: Diversity-MV and SIFID-MV.
+//!   animation; [`metrics`]: Diversity-MV, SIFID-MV and weights-free quality numbers (PSNR, SSIM,
+//!   depth RMSE, patch and colour SWD, floaters).
 //!
 //! ```no_run
 //! use singrav::dataset::{write_dataset, Dataset, DatasetSpec};

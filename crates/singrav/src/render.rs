@@ -34,6 +34,32 @@ impl ViewRenderer {
 
     /// Renders `raw` from every camera (all of one size) in one pass of the render op.
     pub fn render(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<(Tensor, Option<Tensor>)> {
+        let maps = self.render_with(raw, cameras, self.config)?;
+        Ok((maps.rgb, maps.depth))
+    }
+
+    /// Renders `raw` from every camera with colour `(V, 3, h, w)`, depth `(V, 1, h, w)` (divided
+    /// by the depth normaliser) and opacity `(V, 1, h, w)`, whatever `with_depth` said: what the
+    /// metrics compare with a dataset's images, depth maps and alpha.
+    pub fn render_maps(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<ViewMaps> {
+        let config = self.config.with_depth(true).with_opacity(true);
+        let maps = self.render_with(raw, cameras, config)?;
+        let missing = || invalid("renderer", "returned no depth or opacity");
+        Ok(ViewMaps {
+            rgb: maps.rgb,
+            depth: maps.depth.ok_or_else(missing)?,
+            opacity: maps.opacity.ok_or_else(missing)?,
+        })
+    }
+
+    /// One pass of the render op with `config`'s outputs, reshaped to `(V, C, h, w)` maps on
+    /// the volume's device.
+    fn render_with(
+        &self,
+        raw: &Tensor,
+        cameras: &[&Camera],
+        config: RenderConfig,
+    ) -> Result<OptionalMaps> {
         let Some(first) = cameras.first() else {
             return Err(invalid("cameras", "need at least one camera"));
         };
@@ -58,7 +84,7 @@ impl ViewRenderer {
             .activation
             .apply(&raw.squeeze(0)?)?
             .to_device(&Device::Cpu)?;
-        let out = render(&physical, &rays, &self.config)?;
+        let out = render(&physical, &rays, &config)?;
         let views = cameras.len();
         let rgb = out
             .rgb
@@ -66,13 +92,18 @@ impl ViewRenderer {
             .permute((0, 3, 1, 2))?
             .contiguous()?
             .to_device(&device)?;
+        let plane =
+            |t: Tensor| -> Result<Tensor> { Ok(t.reshape((views, 1, h, w))?.to_device(&device)?) };
         let depth = match out.depth {
-            Some(d) => Some(
-                (d.reshape((views, 1, h, w))? / f64::from(self.depth_norm))?.to_device(&device)?,
-            ),
+            Some(d) => Some((plane(d)? / f64::from(self.depth_norm))?),
             None => None,
         };
-        Ok((rgb, depth))
+        let opacity = out.opacity.map(plane).transpose()?;
+        Ok(OptionalMaps {
+            rgb,
+            depth,
+            opacity,
+        })
     }
 
     /// Renders and joins colour and depth into the critics' `(V, 4, h, w)` input (colour only,
@@ -84,4 +115,23 @@ impl ViewRenderer {
             None => rgb,
         })
     }
+}
+
+/// Colour, depth and opacity of renderings, each `(V, C, h, w)`.
+#[derive(Debug, Clone)]
+pub struct ViewMaps {
+    /// Colour `(V, 3, h, w)`, composited on the background.
+    pub rgb: Tensor,
+    /// Expected depth `(V, 1, h, w)` (0 where nothing is hit), divided by the renderer's depth
+    /// normaliser (world units when it is 1).
+    pub depth: Tensor,
+    /// Opacity `(V, 1, h, w)` in [0, 1].
+    pub opacity: Tensor,
+}
+
+/// [`ViewMaps`] with the outputs a render configuration may leave out.
+struct OptionalMaps {
+    rgb: Tensor,
+    depth: Option<Tensor>,
+    opacity: Option<Tensor>,
 }

@@ -12,7 +12,7 @@ use volrender::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
 use crate::error::{Error, Result};
 use crate::model::SinGrav;
-use crate::render::ViewRenderer;
+use crate::render::{ViewMaps, ViewRenderer};
 
 /// One generated scene.
 pub struct Sample {
@@ -83,8 +83,32 @@ impl SinGrav {
     /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
+        self.sample_with(|| self.generate_random(rng), cameras)
+    }
+
+    /// The fixed-noise reconstruction V* ([`SinGrav::reconstruct`]) as a [`Sample`]: the scene
+    /// training fits to the dataset, rendered from `cameras` like any sample.
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+    /// let v_star = model.reconstruction_sample(&cameras)?;
+    /// println!("V* is {:?}", v_star.volume.dims());
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn reconstruction_sample(&self, cameras: &[Camera]) -> Result<Sample> {
+        self.sample_with(|| self.reconstruct(), cameras)
+    }
+
+    /// Times `generate` (a raw volume of the finest 3D scale) and its activation, then renders.
+    fn sample_with(
+        &self,
+        generate: impl FnOnce() -> Result<Tensor>,
+        cameras: &[Camera],
+    ) -> Result<Sample> {
         let started = Instant::now();
-        let raw = self.generate_random(rng)?;
+        let raw = generate()?;
         let volume = self.to_physical(&raw)?;
         let generation_seconds = started.elapsed().as_secs_f64();
         Ok(Sample {
@@ -114,11 +138,48 @@ impl SinGrav {
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized
     /// [`SinGrav::render_size`]), doubled by the upsampler G_N when it is trained.
     pub fn render_raw(&self, raw: &Tensor, cameras: &[Camera]) -> Result<Tensor> {
-        let last = self.volume_scales();
-        let renderer =
-            ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false);
         let refs: Vec<&Camera> = cameras.iter().collect();
-        let (coarse, _) = renderer.render(raw, &refs)?;
+        let (coarse, _) = self.final_renderer().render(raw, &refs)?;
+        self.finish_views(coarse)
+    }
+
+    /// Like [`SinGrav::render_raw`], with the expected depth in world units and the opacity of
+    /// the 3D rendering: colour `(V, 3, H, W)` at the final size (through G_N when trained),
+    /// depth and opacity `(V, 1, h, w)` at [`SinGrav::render_size`] (G_N makes colour only).
+    pub fn render_maps(&self, raw: &Tensor, cameras: &[Camera]) -> Result<ViewMaps> {
+        let refs: Vec<&Camera> = cameras.iter().collect();
+        let maps = self.final_renderer().render_maps(raw, &refs)?;
+        Ok(ViewMaps {
+            rgb: self.finish_views(maps.rgb)?,
+            ..maps
+        })
+    }
+
+    /// The fixed-noise reconstruction V*: the raw volume `(1, 4, s, s, s)` of the finest 3D
+    /// scale built from the reconstruction noise {z*_1, 0, ..., 0} (detached), the volume
+    /// training fits to the dataset's views.
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let v_star = model.reconstruct()?;
+    /// let volume = model.to_physical(&v_star)?;
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn reconstruct(&self) -> Result<Tensor> {
+        let noise = self.reconstruction_noise(self.volume_scales())?;
+        Ok(self.generate(&noise)?.detach())
+    }
+
+    /// The renderer of the finest 3D scale, depth in world units.
+    fn final_renderer(&self) -> ViewRenderer {
+        let last = self.volume_scales();
+        ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false)
+    }
+
+    /// Colour renderings of the 3D pyramid as the model outputs them: doubled by G_N when it
+    /// is trained, clamped to [0, 1].
+    fn finish_views(&self, coarse: Tensor) -> Result<Tensor> {
         if self.has_upsampler() {
             Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?)
         } else {

@@ -223,6 +223,35 @@ fn same_seed_same_weights_other_seed_other_weights() {
 }
 
 #[test]
+fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let plain = micro().with_scales(2).unwrap();
+    let held = TrainConfig {
+        holdout: Some(3),
+        ..plain.clone()
+    };
+    run_to_end(&held, &data, &tmp.path().join("held"));
+    // Frames 0 and 3 are held out: the run sees frames 1, 2, 4 and 5 only.
+    let training = data.subset(&[1, 2, 4, 5]).unwrap();
+    run_to_end(&plain, &training, &tmp.path().join("subset"));
+    assert_same_tensors(
+        &checkpoint_tensors(&tmp.path().join("held")),
+        &checkpoint_tensors(&tmp.path().join("subset")),
+    );
+    let recorded = Checkpoint::load(&tmp.path().join("held").join(CHECKPOINT_FILE), &Device::Cpu)
+        .unwrap()
+        .config;
+    assert_eq!(recorded.holdout, Some(3));
+    let bad = TrainConfig {
+        holdout: Some(1),
+        ..plain
+    };
+    let err = bad.validate().unwrap_err().to_string();
+    assert!(err.contains("holdout") && err.contains("got 1"), "{err}");
+}
+
+#[test]
 fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));

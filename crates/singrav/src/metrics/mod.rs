@@ -7,21 +7,36 @@
 //! - [`sifid_mv`]: SinGAN's SIFID ([`sifid`]) between each generated view and the real one,
 //!   averaged over views and scenes. Needs InceptionV3's first block
 //!   ([`InceptionBlock1::from_safetensors`], weights converted from torchvision).
-//! - [`psnr_per_view`] / [`mean_psnr`]: how closely renderings reproduce the real views.
+//! - [`psnr_per_view`] / [`mean_psnr`], [`ssim_per_view`] / [`mean_ssim`], [`depth_rmse`]: how
+//!   closely renderings (of the reconstruction, say) reproduce the real views.
+//! - [`patch_swd_mv`]: a weights-free analogue of SIFID-MV (sliced Wasserstein distance between
+//!   7 x 7 patch distributions of a Laplacian pyramid).
+//! - [`colour_swd`]: colour drift, the sliced Wasserstein distance between RGB distributions.
+//! - [`floaters`]: the mean opacity generated scenes put where the real views are empty.
 //! - [`FeatureGaussian`]: the Fréchet distance between Gaussians fitted to feature sets, which
 //!   SIFID (and FID) is.
 
+mod colour_swd;
+mod depth;
 mod diversity;
+mod floaters;
 mod frechet;
 mod inception;
+mod patch_swd;
 mod psnr;
 mod sifid;
+mod ssim;
 
+pub use colour_swd::colour_swd;
+pub use depth::depth_rmse;
 pub use diversity::diversity_mv;
+pub use floaters::floaters;
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
+pub use patch_swd::{patch_swd_mv, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED};
 pub use psnr::{mean_psnr, psnr_per_view};
 pub use sifid::{sifid, sifid_mv};
+pub use ssim::{mean_ssim, ssim_per_view};
 
 /// Checks the multi-view metrics' input: at least `min_scenes` scenes, each seen from exactly
 /// the real views' cameras at their size (same shape as `real`).

@@ -58,8 +58,8 @@ const AMPLITUDE_VIEWS: usize = 8;
 const SETUP_STREAM: usize = usize::MAX;
 const PICTURE_STREAM: usize = usize::MAX - 1;
 
-/// Trains SinGRAV on `dataset`, writing checkpoints, the loss log, `config.json` and pictures
-/// into `run_dir`. With `options.resume`, continues from `run_dir`'s checkpoint (which must have
+/// Trains SinGRAV on `dataset` (without its held-out views when `config.holdout` says so),
+/// writing checkpoints, the loss log, `config.json` and pictures into `run_dir`. With `options.resume`, continues from `run_dir`'s checkpoint (which must have
 /// been made with the same configuration) and ends with the same weights as an uninterrupted
 /// run. Without it, refuses a directory that already holds a checkpoint rather than overwrite
 /// it. VGG-19 weights the configuration needs (`options.vgg19_weights`) are loaded before
@@ -77,6 +77,14 @@ pub fn train(
     observer: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<TrainOutcome> {
     config.validate()?;
+    let training_views;
+    let dataset = match config.holdout {
+        Some(every) => {
+            training_views = dataset.subset(&dataset.holdout_split(every)?.0)?;
+            &training_views
+        }
+        None => dataset,
+    };
     let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
     let fitted = load_fitted_target(config, options, run_dir)?;
     let resume = options.resume;
