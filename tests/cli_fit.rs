@@ -60,6 +60,10 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     let psnr = report["training_psnr"].as_f64().unwrap();
     assert!(psnr > 16.0, "{report}");
     assert!(report["held_out_psnr"].as_f64().unwrap() > 12.0, "{report}");
+    let views = report["views"].as_array().unwrap();
+    assert_eq!(views.len(), 6);
+    assert_eq!(views[4]["file_path"], "images/r_000.png");
+    assert_eq!(views[4]["held_out"], true);
     let volume = RadianceVolume::load_safetensors(&out).unwrap();
     assert_eq!(volume.dims().xyz(), [16, 16, 16]);
     let from_vdb =

@@ -76,6 +76,16 @@ struct FitReport<'a> {
     held_out_psnr: Option<f64>,
     /// Seconds spent rendering the views for the PSNR (not part of `seconds`).
     evaluation_seconds: f64,
+    /// PSNR (dB) of every view, by its `file_path`, training views first.
+    views: Vec<ViewPsnr>,
+}
+
+/// One view's PSNR in `VOLUME.fit.json`.
+#[derive(Debug, Serialize)]
+struct ViewPsnr {
+    file_path: String,
+    held_out: bool,
+    psnr: f64,
 }
 
 /// Fits as the arguments say.
@@ -94,18 +104,32 @@ pub fn run(args: &FitArgs) -> Result<()> {
     };
     let fitted = fit_with_progress(&dataset, &training, &config)?;
     let evaluation_start = std::time::Instant::now();
-    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
-    let training_psnr = mean(view_psnr(&fitted.volume, &dataset, &training, &config)?);
-    let held_out_psnr = if held_out.is_empty() {
-        None
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let training_views = view_psnr(&fitted.volume, &dataset, &training, &config)?;
+    let held_out_views = if held_out.is_empty() {
+        Vec::new()
     } else {
-        Some(mean(view_psnr(
-            &fitted.volume,
-            &dataset,
-            &held_out,
-            &config,
-        )?))
+        view_psnr(&fitted.volume, &dataset, &held_out, &config)?
     };
+    let training_psnr = mean(&training_views);
+    let held_out_psnr = (!held_out.is_empty()).then(|| mean(&held_out_views));
+    let names = dataset.frame_names();
+    let views = training
+        .iter()
+        .zip(&training_views)
+        .map(|(&i, &psnr)| (i, false, psnr))
+        .chain(
+            held_out
+                .iter()
+                .zip(&held_out_views)
+                .map(|(&i, &psnr)| (i, true, psnr)),
+        )
+        .map(|(i, held_out, psnr)| ViewPsnr {
+            file_path: names[i].clone(),
+            held_out,
+            psnr,
+        })
+        .collect();
     let report = FitReport {
         dataset: &args.dataset,
         size: config.size,
@@ -117,6 +141,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         held_out_views: held_out.len(),
         held_out_psnr,
         evaluation_seconds: evaluation_start.elapsed().as_secs_f64(),
+        views,
     };
     println!(
         "fitted {size}^3 in {:.1} s ({} steps): PSNR {:.2} dB over {} training views{}",
