@@ -161,6 +161,53 @@ fn train_and_sample_report_bad_input_clearly() {
 }
 
 #[test]
+fn train_refuses_unknown_depth_and_takes_the_depth_kind_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, run) = (tmp.path().join("data"), tmp.path().join("run"));
+    ok(&volgen(&[
+        "scene",
+        "stones",
+        "--out",
+        path(&data),
+        "--views",
+        "3",
+        "--resolution",
+        "16",
+        "--grid",
+        "16",
+    ]));
+    // A foreign dataset that does not say how its depth is measured.
+    let transforms = data.join("transforms.json");
+    let text = std::fs::read_to_string(&transforms).unwrap();
+    let mut root: serde_json::Value = serde_json::from_str(&text).unwrap();
+    root.as_object_mut().unwrap().remove("depth_kind");
+    std::fs::write(&transforms, root.to_string()).unwrap();
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            path(&data),
+            "--out",
+            path(&run),
+            "--preset",
+            "micro",
+        ];
+        args.extend_from_slice(extra);
+        volgen(&args)
+    };
+    let err = failure(&train(&[]));
+    assert!(
+        err.contains("transforms.json")
+            && err.contains("depth_kind")
+            && err.contains("--depth-kind"),
+        "{err}"
+    );
+    let err = failure(&train(&["--depth-kind", "planar"]));
+    assert!(err.contains("planar") && err.contains("\"z\""), "{err}");
+    ok(&train(&["--depth-kind", "expected", "--iterations", "2"]));
+    assert!(run.join("checkpoint.safetensors").is_file());
+}
+
+#[test]
 fn scene_writes_a_loadable_dataset_and_rejects_unknown_names() {
     let tmp = tempfile::tempdir().unwrap();
     for name in ["stones", "mushrooms", "islands"] {

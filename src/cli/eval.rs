@@ -77,7 +77,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .map(|path| InceptionBlock1::from_safetensors(path, &device))
         .transpose()?;
     let model = load_model(&args.model)?;
-    let dataset = load_dataset(&args.dataset, model.config())?;
+    let dataset = load_dataset(&args.dataset, model.config(), None)?;
     ensure!(
         args.views <= dataset.len(),
         "--views {} is more than the {} frames of {}",

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use singrav::dataset::Dataset;
+use singrav::dataset::{Dataset, DepthKind, LoadOptions};
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
 
@@ -18,6 +18,11 @@ pub struct TrainArgs {
     /// The run directory (checkpoint, config.json, log.jsonl, samples/).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// How the dataset's depth maps measure depth, overriding its `depth_kind`: expected
+    /// (volgen's own), z (planar, as Blender's Z pass and most RGB-D sensors) or distance (ray
+    /// length to the surface).
+    #[arg(long, value_name = "KIND")]
+    depth_kind: Option<DepthKind>,
     #[command(flatten)]
     options: TrainOptions,
 }
@@ -90,16 +95,35 @@ impl TrainOptions {
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
     let config = args.options.config()?;
-    let dataset = load_dataset(&args.dataset, &config)?;
+    let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
     train_with_progress(&config, &dataset, &args.out, &args.options.run_options())?;
     println!("trained model: {}", args.out.display());
     Ok(())
 }
 
-/// Loads and checks a dataset for training with `config`.
-pub fn load_dataset(path: &Path, config: &TrainConfig) -> Result<Dataset> {
-    Dataset::load(path, config.background)
-        .with_context(|| format!("loading the dataset {}", path.display()))
+/// Loads and checks a dataset for training with `config`, its depth read as `depth_kind` when
+/// given (else as the dataset says), and reports the pixels left out of the depth loss.
+pub fn load_dataset(
+    path: &Path,
+    config: &TrainConfig,
+    depth_kind: Option<DepthKind>,
+) -> Result<Dataset> {
+    let options = LoadOptions {
+        background: config.background,
+        depth_kind,
+    };
+    let dataset = Dataset::load_with(path, &options)
+        .with_context(|| format!("loading the dataset {}", path.display()))?;
+    let left_out = dataset.depth_left_out();
+    if left_out > 0 {
+        eprintln!(
+            "{}: {left_out} pixels with colour but no depth (depth_kind {}) are left out of the \
+             depth loss",
+            path.display(),
+            dataset.depth_kind()
+        );
+    }
+    Ok(dataset)
 }
 
 /// Trains with a progress bar (scale, step, losses, time left) and a line per scale.
