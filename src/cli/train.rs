@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use singrav::dataset::{Dataset, DepthKind, LoadOptions};
+use singrav::dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
 
@@ -23,6 +23,13 @@ pub struct TrainArgs {
     /// length to the surface).
     #[arg(long, value_name = "KIND")]
     depth_kind: Option<DepthKind>,
+    /// Where the scene is, in the dataset's coordinates: `xmin,ymin,zmin,xmax,ymax,zmax`, or
+    /// `auto` for the box of the depth maps' points (1st to 99th percentile plus 5%; printed).
+    /// Training maps it into the model's cube; sample, animate and edit then work in the
+    /// scene's coordinates. Without it the scene must lie in [-1, 1]^3. Give it again with
+    /// --resume.
+    #[arg(long, value_name = "BOX|auto", allow_hyphen_values = true)]
+    bounds: Option<String>,
     #[command(flatten)]
     options: TrainOptions,
 }
@@ -94,8 +101,25 @@ impl TrainOptions {
 
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
-    let config = args.options.config()?;
+    let mut config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
+    if let Some(bounds) = &args.bounds {
+        let bounds = match bounds.as_str() {
+            "auto" => dataset.auto_bounds()?,
+            given => given
+                .parse::<SceneBounds>()
+                .context("--bounds: expected xmin,ymin,zmin,xmax,ymax,zmax or auto")?,
+        };
+        let cube = bounds.cube();
+        println!(
+            "scene bounds {bounds} (--bounds {}); the model's cube [-1, 1]^3 is {:?}..{:?} \
+             in the scene",
+            args.bounds.as_deref().unwrap_or_default(),
+            cube.min.to_array(),
+            cube.max.to_array()
+        );
+        config.bounds = Some(bounds);
+    }
     train_with_progress(&config, &dataset, &args.out, &args.options.run_options())?;
     println!("trained model: {}", args.out.display());
     Ok(())

@@ -5,6 +5,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use crate::dataset::SceneBounds;
 use crate::error::{invalid, Error, Result};
 
 /// Everything that defines a training run; saved as `config.json` beside every checkpoint so a
@@ -85,6 +86,11 @@ pub struct TrainConfig {
     pub checkpoint_iterations: usize,
     /// Seed of every random draw: weights, noises, views, penalties, projections.
     pub seed: u64,
+    /// Where the scene is in the dataset's coordinates, when not in `[-1, 1]^3`: training maps
+    /// the box into the model's cube, and generated volumes are placed back on
+    /// [`SceneBounds::cube`]. Absent from runs made before it existed (the unit cube).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<SceneBounds>,
 }
 
 /// The features of the last scale's sliced Wasserstein texture loss.
@@ -201,6 +207,7 @@ impl TrainConfig {
             checkpoint_seconds: 300,
             checkpoint_iterations: 0,
             seed: 0,
+            bounds: None,
         };
         let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
             preset: preset.into(),
@@ -309,6 +316,9 @@ impl TrainConfig {
 
     /// Checks that the sizes agree and every setting is in range.
     pub fn validate(&self) -> Result<()> {
+        if let Some(bounds) = self.bounds {
+            SceneBounds::new(bounds.min, bounds.max)?;
+        }
         let n = self.volume_sizes.len();
         if n == 0 {
             return Err(invalid("volume_sizes", "need at least one 3D scale"));

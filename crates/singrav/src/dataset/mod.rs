@@ -80,12 +80,14 @@ use volrender::Camera;
 
 use crate::error::{invalid, Result};
 
+mod bounds;
 mod depth;
 mod load;
 mod pixels;
 mod resize;
 mod write;
 
+pub use bounds::SceneBounds;
 pub use depth::DepthKind;
 pub use write::{render_config, write_dataset, DatasetSpec, DatasetSummary, DEPTH_SCALE};
 

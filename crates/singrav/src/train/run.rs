@@ -75,6 +75,14 @@ pub fn train(
     observer: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<TrainOutcome> {
     config.validate()?;
+    let moved;
+    let dataset = match &config.bounds {
+        Some(bounds) => {
+            moved = dataset.in_model_cube(bounds)?;
+            &moved
+        }
+        None => dataset,
+    };
     let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
     let resume = options.resume;
     crate::io::create_dir(run_dir)?;
