@@ -17,8 +17,9 @@ scene's linear colours encoded as sRGB) and `depth/r_000.exr` Blender's Depth pa
 `ViewLayer.Depth.Z`, planar depth, 1e10 where nothing is hit), so transforms.json says
 `"depth_kind": "z"` and volgen converts it to expected depth on loading.
 
-volgen's model lives in the cube [-1, 1]^3: the scene (the bounding box of its visible
-meshes) must fit in it. The script refuses a scene that does not, naming its bounds.
+The script prints the scene's bounds (the bounding box of its visible meshes) as the
+`--bounds` flag of `volgen train`: a scene outside volgen's cube [-1, 1]^3 needs it (or
+`--bounds auto`, the box of the depth maps' points).
 """
 
 import argparse
@@ -75,13 +76,11 @@ def scene_bounds(scene):
     return lo, hi
 
 
-def check_inside_unit_cube(lo, hi):
-    if min(lo) < -1.0 - 1e-6 or max(hi) > 1.0 + 1e-6:
-        sys.exit(
-            f"error: the scene's meshes span {tuple(round(v, 3) for v in lo)} to "
-            f"{tuple(round(v, 3) for v in hi)}, outside volgen's cube [-1, 1]^3: scale or move "
-            "the scene into it"
-        )
+def report_bounds(lo, hi):
+    flag = ",".join(f"{v:.4g}" for v in (*lo, *hi))
+    inside = min(lo) >= -1.0 and max(hi) <= 1.0
+    where = "inside [-1, 1]^3, no --bounds needed" if inside else "outside [-1, 1]^3"
+    print(f"scene bounds: --bounds {flag} ({where})")
 
 
 def look_at(eye, target):
@@ -150,7 +149,7 @@ def main():
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene
     lo, hi = scene_bounds(scene)
-    check_inside_unit_cube(lo, hi)
+    report_bounds(lo, hi)
     setup_render(scene, args.size, args.samples)
 
     if args.cameras == "scene":

@@ -1,5 +1,6 @@
 """Build the round trip's small scene and save it: a few coloured primitives on a ground plane,
-all inside volgen's cube [-1, 1]^3, lit by a sun.
+lit by a sun, away from the origin (centred at OFFSET) so that the round trip needs and tests
+`volgen train --bounds`.
 
     python tools/blender/make_test_scene.py OUT.blend
 """
@@ -7,6 +8,9 @@ all inside volgen's cube [-1, 1]^3, lit by a sun.
 import sys
 
 import bpy
+from mathutils import Vector
+
+OFFSET = Vector((2.0, -1.0, 0.5))
 
 
 def material(name, rgb):
@@ -17,8 +21,8 @@ def material(name, rgb):
     return mat
 
 
-def add(op, rgb, **kwargs):
-    op(**kwargs)
+def add(op, rgb, location, **kwargs):
+    op(location=OFFSET + Vector(location), **kwargs)
     obj = bpy.context.active_object
     obj.data.materials.append(material(obj.name, rgb))
     return obj
@@ -38,7 +42,7 @@ def main():
         depth=0.7,
         location=(-0.2, 0.45, -0.05),
     )
-    bpy.ops.object.light_add(type="SUN", location=(0, 0, 3), rotation=(0.6, 0.2, 0.8))
+    bpy.ops.object.light_add(type="SUN", location=OFFSET + Vector((0, 0, 3)), rotation=(0.6, 0.2, 0.8))
     bpy.context.active_object.data.energy = 3.0
     world = bpy.data.worlds.new("world")
     world.color = (0.3, 0.3, 0.3)

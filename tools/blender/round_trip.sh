@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Blender -> volgen -> Blender, end to end (docs/blender.md):
-#   1. build a small scene with bpy (a few primitives on a ground plane; make_test_scene.py),
+#   1. build a small scene with bpy (a few primitives on a ground plane, away from the origin;
+#      make_test_scene.py),
 #   2. render a dataset from it with export_dataset.py (Cycles, Z-pass depth, depth_kind "z"),
-#   3. volgen train --preset PRESET (micro by default), 4. volgen sample --vdb,
+#   3. volgen train --preset PRESET --bounds auto (micro by default), 4. volgen sample --vdb,
 #   5. import the VDB into the scene with import_volume.py,
 #   6. render it in Cycles from a dataset view and check it is non-empty where the scene was
 #      (check_round_trip.py), writing a side-by-side picture.
@@ -40,9 +41,10 @@ step "scene: $work/scene.blend"
 "$PYTHON" "$here/make_test_scene.py" "$work/scene.blend" >/dev/null
 step "export: $VIEWS views of $SIZE x $SIZE"
 "$PYTHON" "$here/export_dataset.py" "$work/scene.blend" --out "$work/data" \
-  --views "$VIEWS" --size "$SIZE" --samples "$SAMPLES" | grep -v "^view " | tail -n 1
-step "train --preset $PRESET --iterations $ITERATIONS"
-"$VOLGEN" train "$work/data" --out "$work/run" --preset "$PRESET" --iterations "$ITERATIONS"
+  --views "$VIEWS" --size "$SIZE" --samples "$SAMPLES" | grep -E "^(scene bounds|wrote)"
+step "train --preset $PRESET --iterations $ITERATIONS --bounds auto"
+"$VOLGEN" train "$work/data" --out "$work/run" --preset "$PRESET" --iterations "$ITERATIONS" \
+  --bounds auto
 step "sample --vdb"
 "$VOLGEN" sample "$work/run" --out "$work/samples" --count 1 --vdb
 step "import into $work/with_volume.blend"
