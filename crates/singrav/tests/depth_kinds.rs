@@ -27,11 +27,12 @@ fn c2w() -> [[f64; 4]; 4] {
 }
 
 /// Opacity bytes: the first row's first four pixels are background, the rest foreground but
-/// for pixel 5 (half covered: an edge).
+/// for the edge pixels 5 (partly covered) and 6 (a renderer's exact 0.5, stored as 128/255).
 fn alpha_byte(i: usize) -> u8 {
     match i {
         0..=3 => 0,
         5 => 100,
+        6 => 128,
         _ => 255,
     }
 }
@@ -179,19 +180,21 @@ fn every_background_convention_reads_as_nothing_hit() {
 
 #[test]
 fn foreground_without_depth_is_left_out_and_refused_above_five_percent() {
-    // 43 pixels have opacity > 0.5; one hole among them is 2.3%. The edge pixel 5 (opacity
-    // 0.39) is left out too, but does not count against the foreground.
+    // 42 pixels are foreground; one hole among them is 2.4%. The edge pixels 5 and 6 are
+    // left out too, but do not count against the foreground.
     let dir = tempfile::tempdir().unwrap();
     let mut raw: Vec<f32> = (0..W * H).map(surface).collect();
     raw[5] = 1e10;
+    raw[6] = 1e10;
     raw[20] = f32::INFINITY;
     write_exr_dataset(dir.path(), Some("z"), &raw);
     let data = load(dir.path(), None).unwrap();
-    assert_eq!(data.depth_left_out(), 2);
+    assert_eq!(data.depth_left_out(), 3);
     let level = data.level(W, H, &Device::Cpu).unwrap();
     let mask = values(level.depth_mask.as_ref().unwrap());
     for (i, m) in mask.iter().enumerate() {
-        assert_eq!(*m, if i == 5 || i == 20 { 0.0 } else { 1.0 }, "pixel {i}");
+        let left_out = [5, 6, 20].contains(&i);
+        assert_eq!(*m, if left_out { 0.0 } else { 1.0 }, "pixel {i}");
     }
     assert_eq!(values(&level.depths)[20], 0.0);
 
@@ -205,13 +208,13 @@ fn foreground_without_depth_is_left_out_and_refused_above_five_percent() {
     let got = f64::from(values(&half.depths)[block]);
     assert!((got - want).abs() < 1e-5, "{got} vs {want}");
 
-    // Three holes in the foreground: 3 / 43 = 7.0% > 5%.
+    // Three holes in the foreground: 3 / 42 = 7.1% > 5%.
     raw[30] = 0.0;
     raw[40] = 65504.0;
     write_exr_dataset(dir.path(), Some("z"), &raw);
     let msg = error(load(dir.path(), None));
     assert!(
-        msg.contains("depth/r_0.exr") && msg.contains("3 of the 43") && msg.contains("5%"),
+        msg.contains("depth/r_0.exr") && msg.contains("3 of the 42") && msg.contains("5%"),
         "{msg}"
     );
 }

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat3, Mat4};
 use serde_json::Value;
-
 use volrender::Camera;
 
 use super::depth::{to_expected, Converted, DepthKind, KINDS_EXPLAINED, MAX_HOLE_FRACTION};
@@ -137,7 +136,7 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
             return Err(at.error(
                 &depth_path,
                 format!(
-                    "{} of the {} foreground pixels (opacity > 0.5) have no depth (infinite, \
+                    "{} of the {} foreground pixels (opacity > 0.5 + 1/255) have no depth (infinite, \
                      NaN, >= 1e9, 65504 or 0 under `depth_kind` {kind}); more than {:.0}% \
                      means the depth map does not match the image",
                     converted.foreground_holes,
@@ -176,7 +175,7 @@ fn declared_depth_kind(root: &Value, path: &Path) -> Result<DepthKind> {
             .map_err(|why: String| file_error(path, format!("`depth_kind`: {why}"))),
         Some(other) => Err(file_error(
             path,
-            format!("`depth_kind` must be a string, got {other}: {KINDS_EXPLAINED}"),
+            format!("`depth_kind` must be a string, got {other}; expected {KINDS_EXPLAINED}"),
         )),
     }
 }

@@ -47,8 +47,10 @@
 //!   65504 (half float's largest) or 0 says "no surface". Where alpha is 0 that is the
 //!   background (expected depth 0). Where alpha > 0 and the depth says no surface, the pixel is
 //!   left out of the depth loss (a per-pixel weight that resizing averages; the left-out pixels
-//!   are counted, and `volgen train` reports them); when more than 5% of a view's foreground
-//!   (alpha > 0.5) is left out, loading fails naming the depth file and the count. Negative depth
+//!   are counted, and `volgen train` reports them; the critics, which see whole real views,
+//!   see 0 there); when more than 5% of a view's foreground
+//!   (alpha > 0.5 + 1/255: an 8-bit PNG stores a renderer's exact 0.5 as 128/255) is left out,
+//!   loading fails naming the depth file and the count. Negative depth
 //!   is an error under every kind. A dataset without `depth_kind` and without the flag is refused
 //!   with an error that explains the three kinds: depth read as the wrong kind trains on silently
 //!   wrong depth.
