@@ -103,26 +103,56 @@ impl TrainOptions {
 pub fn run(args: &TrainArgs) -> Result<()> {
     let mut config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
-    if let Some(bounds) = &args.bounds {
-        let bounds = match bounds.as_str() {
-            "auto" => dataset.auto_bounds()?,
-            given => given
-                .parse::<SceneBounds>()
-                .context("--bounds: expected xmin,ymin,zmin,xmax,ymax,zmax or auto")?,
-        };
-        let cube = bounds.cube();
-        println!(
-            "scene bounds {bounds} (--bounds {}); the model's cube [-1, 1]^3 is {:?}..{:?} \
-             in the scene",
-            args.bounds.as_deref().unwrap_or_default(),
-            cube.min.to_array(),
-            cube.max.to_array()
-        );
-        config.bounds = Some(bounds);
-    }
+    config.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
     train_with_progress(&config, &dataset, &args.out, &args.options.run_options())?;
     println!("trained model: {}", args.out.display());
     Ok(())
+}
+
+/// The scene's box as `--bounds` gives it (printed), or `None` without the flag (with a warning
+/// when the depth shows a scene outside the model's cube).
+fn scene_bounds(flag: Option<&str>, dataset: &Dataset) -> Result<Option<SceneBounds>> {
+    let Some(flag) = flag else {
+        warn_if_outside_the_cube(dataset);
+        return Ok(None);
+    };
+    let bounds = match flag {
+        "auto" => dataset.auto_bounds()?,
+        given => given
+            .parse::<SceneBounds>()
+            .context("--bounds: expected xmin,ymin,zmin,xmax,ymax,zmax or auto")?,
+    };
+    let cube = bounds.cube();
+    println!(
+        "scene bounds {bounds} (--bounds {flag}); the model's cube [-1, 1]^3 is {:?}..{:?} in \
+         the scene",
+        cube.min.to_array(),
+        cube.max.to_array()
+    );
+    Ok(Some(bounds))
+}
+
+/// How far past the model's cube `[-1, 1]^3` the depth maps' `auto` box may reach before
+/// training without `--bounds` warns (the box has a 5% margin; the built-in scenes' reach 1.09).
+const CUBE_SLACK: f32 = 1.25;
+
+/// Warns when the scene the depth maps show is not in the model's cube: trained without
+/// `--bounds`, it would be cut off or squeezed.
+fn warn_if_outside_the_cube(dataset: &Dataset) {
+    let Ok(seen) = dataset.auto_bounds() else {
+        return;
+    };
+    if seen
+        .min
+        .iter()
+        .chain(&seen.max)
+        .any(|v| v.abs() > CUBE_SLACK)
+    {
+        eprintln!(
+            "warning: the depth maps' points span {seen}, beyond the model's cube [-1, 1]^3; \
+             give --bounds auto (or the scene's box) to place the scene"
+        );
+    }
 }
 
 /// Loads and checks a dataset for training with `config`, its depth read as `depth_kind` when
