@@ -9,7 +9,8 @@ Inside Blender:
     blender -b scene.blend --python tools/blender/export_dataset.py -- --out DIR --views 100
 
 Cameras are either the paper's hemisphere (default: `--views` cameras placed uniformly by area
-on the upper half of a sphere around the scene, field of view 33.4 degrees, radius 3.5 times
+on the upper half of a sphere around the scene, at least 0.05 of the radius above the
+centre so that no camera sits on the horizon, field of view 33.4 degrees, radius 3.5 times
 the half side of the scene's bounding cube, looking at its centre with +Z up) or the scene's
 own camera objects (`--cameras scene`). Each view is rendered with Cycles on a transparent
 film: `images/r_000.png` holds straight-alpha RGBA (view transform Standard, so colours are the
@@ -95,7 +96,8 @@ def look_at(eye, target):
 
 
 def hemisphere_matrices(views, centre, radius, seed):
-    """`views` camera-to-world matrices uniform by area on the upper hemisphere."""
+    """`views` camera-to-world matrices uniform by area on the upper hemisphere, above 0.05 of
+    the radius."""
     rng = random.Random(seed)
     matrices = []
     for _ in range(views):
