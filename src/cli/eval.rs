@@ -12,6 +12,7 @@ use candle_core::Tensor;
 use rand::SeedableRng;
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
+use singrav::dataset::DepthKind;
 use singrav::metrics::{diversity_mv, sifid_mv, InceptionBlock1};
 
 /// Arguments of `volgen eval`.
@@ -26,6 +27,10 @@ pub struct EvalArgs {
     /// are the real views. Required because a run does not record where its dataset was.
     #[arg(long, value_name = "DIR")]
     dataset: PathBuf,
+    /// How the dataset's depth maps measure depth, when its transforms.json does not say (as
+    /// `volgen train --depth-kind`).
+    #[arg(long, value_name = "KIND")]
+    depth_kind: Option<DepthKind>,
     /// Scenes to generate (at least 2; the paper: 50).
     #[arg(long, default_value_t = 8)]
     scenes: usize,
@@ -77,7 +82,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .map(|path| InceptionBlock1::from_safetensors(path, &device))
         .transpose()?;
     let model = load_model(&args.model)?;
-    let dataset = load_dataset(&args.dataset, model.config(), None)?;
+    let dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
+    // The model renders in its own cube: a run trained with --bounds sees the views there.
+    let dataset = match &model.config().bounds {
+        Some(bounds) => dataset.in_model_cube(bounds)?,
+        None => dataset,
+    };
     ensure!(
         args.views <= dataset.len(),
         "--views {} is more than the {} frames of {}",
