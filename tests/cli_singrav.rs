@@ -192,6 +192,137 @@ fn train_and_sample_report_bad_input_clearly() {
 }
 
 #[test]
+fn train_refuses_unknown_depth_and_takes_the_depth_kind_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, run) = (tmp.path().join("data"), tmp.path().join("run"));
+    ok(&volgen(&[
+        "scene",
+        "stones",
+        "--out",
+        path(&data),
+        "--views",
+        "3",
+        "--resolution",
+        "16",
+        "--grid",
+        "16",
+    ]));
+    // A foreign dataset that does not say how its depth is measured.
+    let transforms = data.join("transforms.json");
+    let text = std::fs::read_to_string(&transforms).unwrap();
+    let mut root: serde_json::Value = serde_json::from_str(&text).unwrap();
+    root.as_object_mut().unwrap().remove("depth_kind");
+    std::fs::write(&transforms, root.to_string()).unwrap();
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            path(&data),
+            "--out",
+            path(&run),
+            "--preset",
+            "micro",
+        ];
+        args.extend_from_slice(extra);
+        volgen(&args)
+    };
+    let err = failure(&train(&[]));
+    assert!(
+        err.contains("transforms.json")
+            && err.contains("depth_kind")
+            && err.contains("--depth-kind"),
+        "{err}"
+    );
+    let err = failure(&train(&["--depth-kind", "planar"]));
+    assert!(err.contains("planar") && err.contains("\"z\""), "{err}");
+    ok(&train(&["--depth-kind", "expected", "--iterations", "2"]));
+    assert!(run.join("checkpoint.safetensors").is_file());
+}
+
+#[test]
+fn bounds_are_recorded_and_samples_land_in_the_scene() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, run) = (tmp.path().join("data"), tmp.path().join("run"));
+    ok(&volgen(&[
+        "scene",
+        "stones",
+        "--out",
+        path(&data),
+        "--views",
+        "3",
+        "--resolution",
+        "16",
+        "--grid",
+        "16",
+    ]));
+    let train = |bounds: &str| {
+        volgen(&[
+            "train",
+            path(&data),
+            "--out",
+            path(&run),
+            "--preset",
+            "micro",
+            "--iterations",
+            "2",
+            "--bounds",
+            bounds,
+        ])
+    };
+    let err = failure(&train("-5,-5,-5,5,5,5"));
+    assert!(err.contains("inside the box"), "{err}");
+    let err = failure(&train("0,0,0,1,1"));
+    assert!(
+        err.contains("--bounds") && err.contains("6 numbers"),
+        "{err}"
+    );
+    let text = ok(&train("auto"));
+    assert!(text.contains("scene bounds"), "{text}");
+    std::fs::remove_dir_all(&run).unwrap();
+
+    // A box of half side 1.5 centred at z = -0.5: the model's cube is [-1.5, 1.5]^2 x [-2, 1].
+    ok(&train("-1.5,-1.5,-2,1.5,1.5,1"));
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(
+        config["bounds"]["min"],
+        serde_json::json!([-1.5, -1.5, -2.0])
+    );
+    let samples = tmp.path().join("samples");
+    ok(&volgen(&[
+        "sample",
+        path(&run),
+        "--out",
+        path(&samples),
+        "--count",
+        "1",
+        "--vdb",
+    ]));
+    let volume = RadianceVolume::load_safetensors(samples.join("scene_0.safetensors")).unwrap();
+    let aabb = volume.aabb();
+    assert_eq!(aabb.min.to_array(), [-1.5, -1.5, -2.0]);
+    assert_eq!(aabb.max.to_array(), [1.5, 1.5, 1.0]);
+    let from_vdb = RadianceVolume::read_vdb(samples.join("scene_0.vdb"), volume.grid()).unwrap();
+    assert_eq!(from_vdb.aabb(), aabb);
+
+    // Edit boxes are in the scene's coordinates too: this one is the cube's lower quarter in
+    // x and y, and one reaching z = 1.5 leaves the cube.
+    let edit = |remove: &str| {
+        volgen(&[
+            "edit",
+            path(&run),
+            "--out",
+            path(&tmp.path().join("edit")),
+            "--no-harmonize",
+            "--remove",
+            remove,
+        ])
+    };
+    ok(&edit("-1.5,-1.5,-2,0,0,1"));
+    let err = failure(&edit("-1,-1,-1,1,1,1.5"));
+    assert!(err.contains("remove"), "{err}");
+}
+
+#[test]
 fn scene_writes_a_loadable_dataset_and_rejects_unknown_names() {
     let tmp = tempfile::tempdir().unwrap();
     for name in ["stones", "mushrooms", "islands"] {

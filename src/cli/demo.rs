@@ -105,7 +105,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     write_dataset(scene.as_ref(), &dataset_dir, &spec)
         .with_context(|| format!("writing the dataset to {}", dataset_dir.display()))?;
     let dataset_seconds = started.elapsed().as_secs_f64();
-    let dataset = load_dataset(&dataset_dir, &config)?;
+    let dataset = load_dataset(&dataset_dir, &config, None)?;
 
     // A run left by an earlier demo with the same settings is continued, not overwritten.
     let resume = args.train.resume || run_dir.join(CHECKPOINT_FILE).exists();
@@ -119,7 +119,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
     let options = RunOptions {
         resume,
-        ..args.train.run_options(&dataset, &run_dir)?
+        ..args.train.run_options(&config, &dataset, &run_dir)?
     };
     let model = train_with_progress(&config, &dataset, &run_dir, &options)?;
     let state = Checkpoint::load(&run_dir.join(CHECKPOINT_FILE), model.device())?.state;

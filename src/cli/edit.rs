@@ -12,6 +12,7 @@ use glam::Vec3;
 use radiance_volume::Aabb;
 use rand::SeedableRng;
 use singrav::applications::{empty_voxel, Edit};
+use singrav::dataset::SceneBounds;
 use singrav::sample::showcase_cameras;
 use singrav::SinGrav;
 
@@ -31,7 +32,8 @@ pub struct EditArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Empty a box (world coordinates inside [-1, 1]^3, Z up). Repeatable. Edits apply in the
+    /// Empty a box (scene coordinates, Z up: inside [-1, 1]^3, or the cube of the run's
+    /// --bounds). Repeatable. Edits apply in the
     /// order: removals, duplicates, moves.
     #[arg(
         long,
@@ -125,8 +127,10 @@ fn parse_offset(text: &str) -> Result<Vec3, String> {
 }
 
 impl EditArgs {
-    /// The edits in the order they apply, each checked against the volume box.
-    fn edits(&self) -> Result<Vec<Edit>> {
+    /// The edits in the order they apply, each checked against the volume box; boxes and
+    /// offsets are in the scene's coordinates, mapped into the model's cube when the run was
+    /// trained with `bounds`.
+    fn edits(&self, bounds: Option<&SceneBounds>) -> Result<Vec<Edit>> {
         ensure!(
             self.duplicate.len() == self.to.len(),
             "--duplicate: each needs its --to (got {} --duplicate and {} --to)",
@@ -139,11 +143,26 @@ impl EditArgs {
             self.move_box.len(),
             self.by.len()
         );
-        let removals = self.remove.iter().map(|&region| Edit::Remove { region });
-        let duplicates = (self.duplicate.iter().zip(&self.to))
-            .map(|(&region, &offset)| Edit::Duplicate { region, offset });
-        let moves = (self.move_box.iter().zip(&self.by))
-            .map(|(&region, &offset)| Edit::Move { region, offset });
+        let place = |region: &Aabb| match bounds {
+            Some(b) => Aabb {
+                min: b.to_model(region.min),
+                max: b.to_model(region.max),
+            },
+            None => *region,
+        };
+        let shift = |offset: &Vec3| bounds.map_or(*offset, |b| *offset / b.half_side());
+        let removals = self.remove.iter().map(|region| Edit::Remove {
+            region: place(region),
+        });
+        let duplicates =
+            (self.duplicate.iter().zip(&self.to)).map(|(region, offset)| Edit::Duplicate {
+                region: place(region),
+                offset: shift(offset),
+            });
+        let moves = (self.move_box.iter().zip(&self.by)).map(|(region, offset)| Edit::Move {
+            region: place(region),
+            offset: shift(offset),
+        });
         let edits: Vec<Edit> = removals.chain(duplicates).chain(moves).collect();
         ensure!(
             !edits.is_empty(),
@@ -193,8 +212,8 @@ fn generators(from: usize, to: usize) -> String {
 
 /// Generates the scene, edits it, harmonises it, and writes the three.
 pub fn run(args: &EditArgs) -> Result<()> {
-    let edits = args.edits()?;
     let model = load_model(&args.model)?;
+    let edits = args.edits(model.config().bounds.as_ref())?;
     let harmonize_from = args.harmonize_from(&model)?;
     let cameras = showcase_cameras(args.views, model.render_size())?;
     let write = |stem: &str, raw: &candle_core::Tensor, what: String| -> Result<()> {

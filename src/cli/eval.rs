@@ -13,7 +13,7 @@ use candle_core::{Device, Tensor};
 use rand::SeedableRng;
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
-use singrav::dataset::Dataset;
+use singrav::dataset::{Dataset, DepthKind};
 use singrav::metrics::{
     colour_swd, depth_rmse, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv,
     InceptionBlock1, PATCH_SWD_MIN_SIDE,
@@ -34,6 +34,10 @@ pub struct EvalArgs {
     /// are the real views. Required because a run does not record where its dataset was.
     #[arg(long, value_name = "DIR")]
     dataset: PathBuf,
+    /// How the dataset's depth maps measure depth, when its transforms.json does not say (as
+    /// `volgen train --depth-kind`).
+    #[arg(long, value_name = "KIND")]
+    depth_kind: Option<DepthKind>,
     /// Scenes to generate (at least 2; the paper: 50).
     #[arg(long, default_value_t = 8)]
     scenes: usize,
@@ -156,7 +160,12 @@ fn evaluate(
     device: &Device,
 ) -> Result<Evaluation> {
     let model = load_model(model_path)?;
-    let dataset = load_dataset(&args.dataset, model.config())?;
+    let dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
+    // The model renders in its own cube: a run trained with --bounds sees the views there.
+    let dataset = match &model.config().bounds {
+        Some(bounds) => dataset.in_model_cube(bounds)?,
+        None => dataset,
+    };
     ensure!(
         args.views <= dataset.len(),
         "--views {} is more than the {} frames of {}",

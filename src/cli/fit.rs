@@ -8,10 +8,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{ensure, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
-use singrav::dataset::Dataset;
+use singrav::dataset::{Dataset, DepthKind};
 use singrav::fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, FittedVolume};
+use singrav::TrainConfig;
 
 use super::export::{write_exr_slices, write_vdb, Encoding};
+use super::train::{load_dataset, scene_bounds};
 
 /// Arguments of `volgen fit`.
 #[derive(Debug, clap::Args)]
@@ -52,6 +54,15 @@ pub struct FitArgs {
     /// Weight of total variation on raw colour (0: off).
     #[arg(long, value_name = "W", default_value_t = FitConfig::default().regularisers.tv_colour)]
     tv_colour: f32,
+    /// How the dataset's depth maps measure depth, when its transforms.json does not say
+    /// (expected, z or distance; as `volgen train --depth-kind`).
+    #[arg(long, value_name = "KIND")]
+    depth_kind: Option<DepthKind>,
+    /// Where the scene is: `xmin,ymin,zmin,xmax,ymax,zmax` or `auto` (as `volgen train
+    /// --bounds`). The volume covers the model's cube around that box, in the scene's own
+    /// coordinates; without it, [-1, 1]^3.
+    #[arg(long, value_name = "BOX|auto")]
+    bounds: Option<String>,
     /// Fit colour and opacity only, ignoring the dataset's depth.
     #[arg(long)]
     no_depth: bool,
@@ -95,9 +106,12 @@ pub fn run(args: &FitArgs) -> Result<()> {
         "--out {}: expected a file name ending in .safetensors",
         args.out.display()
     );
-    let config = fit_config(args)?;
-    let dataset = Dataset::load(&args.dataset, config.background)
-        .with_context(|| format!("loading the dataset {}", args.dataset.display()))?;
+    let mut config = fit_config(args)?;
+    let training_config = TrainConfig::preset("tiny")?;
+    let dataset = load_dataset(&args.dataset, &training_config, args.depth_kind)?;
+    if let Some(bounds) = scene_bounds(args.bounds.as_deref(), &dataset)? {
+        config.aabb = bounds.cube();
+    }
     let (training, held_out) = match args.holdout {
         Some(every) => dataset.holdout_split(every)?,
         None => ((0..dataset.len()).collect(), Vec::new()),

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use singrav::dataset::Dataset;
+use singrav::dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
 
@@ -18,6 +18,18 @@ pub struct TrainArgs {
     /// The run directory (checkpoint, config.json, log.jsonl, samples/).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// How the dataset's depth maps measure depth, overriding its `depth_kind`: expected
+    /// (volgen's own), z (planar, as Blender's Z pass and most RGB-D sensors) or distance (ray
+    /// length to the surface).
+    #[arg(long, value_name = "KIND")]
+    depth_kind: Option<DepthKind>,
+    /// Where the scene is, in the dataset's coordinates: `xmin,ymin,zmin,xmax,ymax,zmax`, or
+    /// `auto` for the box of the depth maps' points (1st to 99th percentile plus 5%; printed).
+    /// Training maps it into the model's cube; sample, animate and edit then work in the
+    /// scene's coordinates. Without it the scene must lie in [-1, 1]^3. Give it again with
+    /// --resume.
+    #[arg(long, value_name = "BOX|auto", allow_hyphen_values = true)]
+    bounds: Option<String>,
     #[command(flatten)]
     options: TrainOptions,
 }
@@ -105,11 +117,16 @@ impl TrainOptions {
 
     /// How the run goes beside its configuration: resume or not, the VGG-19 weights.
     /// With `--fit`, runs the fit into `run_dir` (unless resuming a run that has its copy).
-    pub fn run_options(&self, dataset: &Dataset, run_dir: &Path) -> Result<RunOptions> {
+    pub fn run_options(
+        &self,
+        config: &TrainConfig,
+        dataset: &Dataset,
+        run_dir: &Path,
+    ) -> Result<RunOptions> {
         let fitted_volume = match (&self.fitted, self.fit) {
             (Some(path), _) => Some(path.clone()),
             (None, true) => Some(fit_for_training(
-                &self.config()?,
+                config,
                 self.fit_steps,
                 dataset,
                 run_dir,
@@ -148,6 +165,10 @@ fn fit_for_training(
         use_depth: config.use_depth,
         seed: config.seed,
         budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
+        // In the scene's coordinates, over the model's cube there.
+        aabb: config
+            .bounds
+            .map_or(radiance_volume::Aabb::CUBE, |bounds| bounds.cube()),
         ..defaults
     };
     // The fit sees only the views training sees, so held-out views stay held out.
@@ -168,18 +189,84 @@ fn fit_for_training(
 
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
-    let config = args.options.config()?;
-    let dataset = load_dataset(&args.dataset, &config)?;
-    let options = args.options.run_options(&dataset, &args.out)?;
+    let mut config = args.options.config()?;
+    let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
+    config.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
+    let options = args.options.run_options(&config, &dataset, &args.out)?;
     train_with_progress(&config, &dataset, &args.out, &options)?;
     println!("trained model: {}", args.out.display());
     Ok(())
 }
 
-/// Loads and checks a dataset for training with `config`.
-pub fn load_dataset(path: &Path, config: &TrainConfig) -> Result<Dataset> {
-    Dataset::load(path, config.background)
-        .with_context(|| format!("loading the dataset {}", path.display()))
+/// The scene's box as `--bounds` gives it (printed), or `None` without the flag (with a warning
+/// when the depth shows a scene outside the model's cube).
+pub fn scene_bounds(flag: Option<&str>, dataset: &Dataset) -> Result<Option<SceneBounds>> {
+    let Some(flag) = flag else {
+        warn_if_outside_the_cube(dataset);
+        return Ok(None);
+    };
+    let bounds = match flag {
+        "auto" => dataset.auto_bounds()?,
+        given => given
+            .parse::<SceneBounds>()
+            .context("--bounds: expected xmin,ymin,zmin,xmax,ymax,zmax or auto")?,
+    };
+    let cube = bounds.cube();
+    println!(
+        "scene bounds {bounds} (--bounds {flag}); the model's cube [-1, 1]^3 is {:?}..{:?} in \
+         the scene",
+        cube.min.to_array(),
+        cube.max.to_array()
+    );
+    Ok(Some(bounds))
+}
+
+/// How far past the model's cube `[-1, 1]^3` the depth maps' `auto` box may reach before
+/// training without `--bounds` warns (the box has a 5% margin; the built-in scenes' reach 1.09).
+const CUBE_SLACK: f32 = 1.25;
+
+/// Warns when the scene the depth maps show is not in the model's cube: trained without
+/// `--bounds`, it would be cut off or squeezed.
+fn warn_if_outside_the_cube(dataset: &Dataset) {
+    let Ok(seen) = dataset.auto_bounds() else {
+        return;
+    };
+    if seen
+        .min
+        .iter()
+        .chain(&seen.max)
+        .any(|v| v.abs() > CUBE_SLACK)
+    {
+        eprintln!(
+            "warning: the depth maps' points span {seen}, beyond the model's cube [-1, 1]^3; \
+             give --bounds auto (or the scene's box) to place the scene"
+        );
+    }
+}
+
+/// Loads and checks a dataset for training with `config`, its depth read as `depth_kind` when
+/// given (else as the dataset says), and reports the pixels left out of the depth loss.
+pub fn load_dataset(
+    path: &Path,
+    config: &TrainConfig,
+    depth_kind: Option<DepthKind>,
+) -> Result<Dataset> {
+    let options = LoadOptions {
+        background: config.background,
+        depth_kind,
+    };
+    let dataset = Dataset::load_with(path, &options)
+        .with_context(|| format!("loading the dataset {}", path.display()))?;
+    let left_out = dataset.depth_left_out();
+    if left_out > 0 {
+        eprintln!(
+            "{}: {left_out} pixels with colour but no depth (depth_kind {}) are left out of the \
+             depth loss",
+            path.display(),
+            dataset.depth_kind()
+        );
+    }
+    Ok(dataset)
 }
 
 /// Trains with a progress bar (scale, step, losses, time left) and a line per scale.

@@ -5,6 +5,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use crate::dataset::SceneBounds;
 use crate::error::{invalid, Error, Result};
 
 /// Everything that defines a training run; saved as `config.json` beside every checkpoint so a
@@ -96,6 +97,11 @@ pub struct TrainConfig {
     /// on every view. Absent from checkpoints made before it existed, which used every view.
     #[serde(default)]
     pub holdout: Option<usize>,
+    /// Where the scene is in the dataset's coordinates, when not in `[-1, 1]^3`: training maps
+    /// the box into the model's cube, and generated volumes are placed back on
+    /// [`SceneBounds::cube`]. Absent from runs made before it existed (the unit cube).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<SceneBounds>,
 }
 
 /// The features of the last scale's sliced Wasserstein texture loss.
@@ -214,6 +220,7 @@ impl TrainConfig {
             checkpoint_iterations: 0,
             seed: 0,
             holdout: None,
+            bounds: None,
         };
         let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
             preset: preset.into(),
@@ -327,6 +334,9 @@ impl TrainConfig {
                 "lambda_fitted",
                 format!("expected a finite weight >= 0, got {}", self.lambda_fitted),
             ));
+        }
+        if let Some(bounds) = self.bounds {
+            SceneBounds::new(bounds.min, bounds.max)?;
         }
         let n = self.volume_sizes.len();
         if n == 0 {

@@ -125,14 +125,20 @@ impl SinGrav {
         Ok(self.generate(&noise)?.detach())
     }
 
-    /// The physical volume over `[-1, 1]^3` of a raw volume `(1, 4, s, s, s)`, through the
-    /// configuration's activation.
+    /// The physical volume of a raw volume `(1, 4, s, s, s)`, through the configuration's
+    /// activation, in the scene's coordinates: over `[-1, 1]^3`, or when the run was trained
+    /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) over their
+    /// [`cube`](crate::dataset::SceneBounds::cube) with density divided by its half side (the
+    /// same opacity along the longer rays).
     pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
-        Ok(RadianceVolume::from_raw(
-            &raw.squeeze(0)?,
-            Aabb::CUBE,
-            &self.config().activation(),
-        )?)
+        let volume = self.config().activation().apply(&raw.squeeze(0)?)?;
+        let Some(bounds) = self.config().bounds else {
+            return Ok(RadianceVolume::new(volume, Aabb::CUBE)?);
+        };
+        let density = (volume.narrow(0, 0, 1)? / f64::from(bounds.half_side()))?;
+        let rest = volume.narrow(0, 1, volume.dim(0)? - 1)?;
+        let volume = Tensor::cat(&[&density, &rest], 0)?;
+        Ok(RadianceVolume::new(volume, bounds.cube())?)
     }
 
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized

@@ -5,9 +5,11 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat3, Mat4};
 use serde_json::Value;
+use volrender::Camera;
 
+use super::depth::{to_expected, Converted, DepthKind, KINDS_EXPLAINED, MAX_HOLE_FRACTION};
 use super::pixels::{read_depth_exr, read_depth_png, read_rgba, Pixels};
-use super::{transforms_file, Dataset, FramePixels};
+use super::{transforms_file, Dataset, FramePixels, LoadOptions};
 use crate::error::{io_error, Error, Result};
 
 /// Tolerance of the rigidity check on a camera's rotation (orthonormality and determinant).
@@ -44,7 +46,7 @@ fn file_error(path: &Path, why: impl Into<String>) -> Error {
     }
 }
 
-pub(super) fn load(transforms: &Path, background: [f32; 3]) -> Result<Dataset> {
+pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> {
     let path = transforms_file(transforms);
     let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
     let root: Value = serde_json::from_str(&python_json_to_strict(&text))
@@ -56,16 +58,10 @@ pub(super) fn load(transforms: &Path, background: [f32; 3]) -> Result<Dataset> {
     if frames.is_empty() {
         return Err(file_error(&path, "no frames: `frames` is empty"));
     }
-    match root.get("depth_kind") {
-        None => {}
-        Some(Value::String(kind)) if kind == "expected" => {}
-        Some(other) => {
-            return Err(file_error(
-                &path,
-                format!("`depth_kind` {other} is not supported; only \"expected\" depth is"),
-            ))
-        }
-    }
+    let kind = match options.depth_kind {
+        Some(kind) => kind,
+        None => declared_depth_kind(&root, &path)?,
+    };
     let depth_scale = match root.get("depth_scale") {
         None => None,
         Some(v) => Some(
@@ -84,7 +80,7 @@ pub(super) fn load(transforms: &Path, background: [f32; 3]) -> Result<Dataset> {
 
     let mut size = declared;
     let mut names = Vec::with_capacity(frames.len());
-    let mut pixels = Vec::with_capacity(frames.len());
+    let mut raw = Vec::with_capacity(frames.len());
     for (i, frame) in frames.iter().enumerate() {
         let frame_path = frame.get("file_path").and_then(Value::as_str);
         let at = FrameRef {
@@ -111,28 +107,77 @@ pub(super) fn load(transforms: &Path, background: [f32; 3]) -> Result<Dataset> {
                 ),
             ));
         }
-        let depth = read_depth(frame, base, depth_scale, &at)?;
+        let (depth_path, depth) = read_depth(frame, base, depth_scale, &at)?;
         if depth.width != width || depth.height != height {
             return Err(at.entry_error(format!(
                 "depth map is {} x {} pixels, but its image is {width} x {height}",
                 depth.width, depth.height
             )));
         }
-        pixels.push(composite(&rgba, depth.data, background));
+        raw.push((rgba, depth_path, depth.data));
         names.push(at.name);
     }
     let (width, height) = size.unwrap_or_default();
-    let cameras = volrender::load_transforms(&path, Some((width, height)))?
+    let cameras: Vec<Camera> = volrender::load_transforms(&path, Some((width, height)))?
         .into_iter()
         .map(|frame| frame.camera)
         .collect();
+    let mut pixels = Vec::with_capacity(raw.len());
+    for (((rgba, depth_path, depth), camera), name) in raw.into_iter().zip(&cameras).zip(&names) {
+        let at = FrameRef {
+            transforms: &path,
+            name: name.clone(),
+        };
+        let opacity: Vec<f32> = rgba.data.iter().map(|p| p[3]).collect();
+        let converted = to_expected(kind, &depth, &opacity, camera)
+            .map_err(|why| at.error(&depth_path, format!("`depth_kind` {kind}: {why}")))?;
+        let allowed = MAX_HOLE_FRACTION * converted.foreground as f32;
+        if converted.foreground_holes as f32 > allowed {
+            return Err(at.error(
+                &depth_path,
+                format!(
+                    "{} of the {} foreground pixels (opacity > 0.5 + 1/255) have no depth (infinite, \
+                     NaN, >= 1e9, 65504 or 0 under `depth_kind` {kind}); more than {:.0}% \
+                     means the depth map does not match the image",
+                    converted.foreground_holes,
+                    converted.foreground,
+                    MAX_HOLE_FRACTION * 100.0
+                ),
+            ));
+        }
+        pixels.push(composite(&rgba, converted, options.background));
+    }
     Ok(Dataset {
         width,
         height,
         cameras,
         names,
         frames: pixels,
+        depth_kind: kind,
     })
+}
+
+/// The `depth_kind` of `transforms.json`; refuses a dataset without one, since reading planar
+/// or ray-length depth as expected depth trains on silently wrong depth. Every dataset volgen
+/// writes states its kind.
+fn declared_depth_kind(root: &Value, path: &Path) -> Result<DepthKind> {
+    match root.get("depth_kind") {
+        None => Err(file_error(
+            path,
+            format!(
+                "`depth_kind` is missing: say how the depth maps measure depth, either in \
+                 transforms.json (\"depth_kind\": ...) or with `volgen train --depth-kind KIND`; \
+                 KIND is {KINDS_EXPLAINED}"
+            ),
+        )),
+        Some(Value::String(kind)) => kind
+            .parse()
+            .map_err(|why: String| file_error(path, format!("`depth_kind`: {why}"))),
+        Some(other) => Err(file_error(
+            path,
+            format!("`depth_kind` must be a string, got {other}; expected {KINDS_EXPLAINED}"),
+        )),
+    }
 }
 
 /// `w` and `h` from the top level, if given.
@@ -175,13 +220,13 @@ fn file_problem(at: &FrameRef<'_>, file: &Path, why: String) -> Error {
     }
 }
 
-/// Reads a frame's depth map in world units.
+/// Reads a frame's depth map in world units, with the file it came from.
 fn read_depth(
     frame: &Value,
     base: &Path,
     depth_scale: Option<f32>,
     at: &FrameRef<'_>,
-) -> Result<Pixels<f32>> {
+) -> Result<(PathBuf, Pixels<f32>)> {
     let name = frame
         .get("depth_file_path")
         .and_then(Value::as_str)
@@ -193,7 +238,8 @@ fn read_depth(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     if is_exr {
-        return read_depth_exr(&file).map_err(|why| file_problem(at, &file, why));
+        let depth = read_depth_exr(&file).map_err(|why| file_problem(at, &file, why))?;
+        return Ok((file, depth));
     }
     let scale = depth_scale.ok_or_else(|| {
         at.entry_error(format!(
@@ -202,15 +248,16 @@ fn read_depth(
         ))
     })?;
     let counts = read_depth_png(&file).map_err(|why| file_problem(at, &file, why))?;
-    Ok(Pixels {
+    let depth = Pixels {
         width: counts.width,
         height: counts.height,
         data: counts.data.iter().map(|&c| f32::from(c) * scale).collect(),
-    })
+    };
+    Ok((file, depth))
 }
 
-/// Composites straight RGBA onto `background`, keeping opacity and depth.
-fn composite(rgba: &Pixels<[f32; 4]>, depth: Vec<f32>, background: [f32; 3]) -> FramePixels {
+/// Composites straight RGBA onto `background`, keeping opacity and the converted depth.
+fn composite(rgba: &Pixels<[f32; 4]>, depth: Converted, background: [f32; 3]) -> FramePixels {
     let plane = rgba.data.len();
     let mut rgb = vec![0f32; 3 * plane];
     for (i, [r, g, b, a]) in rgba.data.iter().copied().enumerate() {
@@ -221,7 +268,9 @@ fn composite(rgba: &Pixels<[f32; 4]>, depth: Vec<f32>, background: [f32; 3]) -> 
     FramePixels {
         rgb,
         opacity: rgba.data.iter().map(|p| p[3]).collect(),
-        depth,
+        depth: depth.depth,
+        depth_mask: depth.mask,
+        depth_left_out: depth.left_out,
     }
 }
 

@@ -29,11 +29,31 @@
 //!   PNG, RGBA with straight (not premultiplied) alpha, or RGB (opaque). Without an extension
 //!   (Blender NeRF style) `.png` is appended when the bare name does not exist.
 //! - `depth_file_path` (required): a 16-bit grey PNG whose counts times the top-level
-//!   `depth_scale` (world units per count; required for PNG depth) give the depth, or an `.exr`
-//!   file whose channel `Z` (or `Y`, or `R` when there is no `Z`) holds depth in world units.
-//! - `depth_kind`: optional; when present it must be `"expected"`. Depth is the renderer's
-//!   expected depth along the ray, `sum_i w_i t_i` (t is the distance from the camera, not the
-//!   z coordinate), not divided by opacity, so 0 where nothing is hit.
+//!   `depth_scale` (world units per count, required for PNG depth: millimetre PNGs are 0.001)
+//!   give the depth, or an `.exr` file (single- or multi-part) whose channel `Z` or ending in `.Z`
+//!   (Blender's `ViewLayer.Depth.Z`), or else `Y`, or else `R`, holds depth in world units.
+//! - `depth_kind` (required, or `volgen train --depth-kind KIND`, which overrides it; volgen
+//!   writes it in every dataset it makes): how the depth maps measure depth.
+//!   - `"expected"`: the renderer's expected depth along the ray, `sum_i w_i t_i` (t is the
+//!     distance from the camera, not the z coordinate), not divided by opacity, so 0 where nothing
+//!     is hit. Read as is; a non-finite value is an error.
+//!   - `"z"`: planar depth, the distance along the camera's viewing axis (-Z) to the surface, as
+//!     Blender's Z pass and most RGB-D sensors give it. Divided by the cosine between the pixel
+//!     centre's ray and the viewing axis, it becomes ray distance, then as `"distance"`.
+//!   - `"distance"`: the ray length to the surface. Loading stores `alpha x distance`, the
+//!     expected depth of a surface covering the fraction alpha of the pixel.
+//!
+//!   Under `"z"` and `"distance"` a value that is infinite, NaN, >= 1e9 (Blender writes 1e10),
+//!   65504 (half float's largest) or 0 says "no surface". Where alpha is 0 that is the
+//!   background (expected depth 0). Where alpha > 0 and the depth says no surface, the pixel is
+//!   left out of the depth loss (a per-pixel weight that resizing averages; the left-out pixels
+//!   are counted, and `volgen train` reports them; the critics, which see whole real views,
+//!   see 0 there); when more than 5% of a view's foreground
+//!   (alpha > 0.5 + 1/255: an 8-bit PNG stores a renderer's exact 0.5 as 128/255) is left out,
+//!   loading fails naming the depth file and the count. Negative depth
+//!   is an error under every kind. A dataset without `depth_kind` and without the flag is refused
+//!   with an error that explains the three kinds: depth read as the wrong kind trains on silently
+//!   wrong depth.
 //!
 //! Pixels relate to the renderer's premultiplied colour `C` and opacity `a` by `alpha = a` and
 //! stored `rgb = C / a`. Loading composites onto a background `bg`: `rgb * a + bg * (1 - a)`,
@@ -62,11 +82,15 @@ use volrender::Camera;
 
 use crate::error::{invalid, Result};
 
+mod bounds;
+mod depth;
 mod load;
 mod pixels;
 mod resize;
 mod write;
 
+pub use bounds::SceneBounds;
+pub use depth::DepthKind;
 pub use write::{render_config, write_dataset, DatasetSpec, DatasetSummary, DEPTH_SCALE};
 
 use resize::resize_plane;
@@ -92,6 +116,32 @@ pub struct Dataset {
     cameras: Vec<Camera>,
     names: Vec<String>,
     frames: Vec<FramePixels>,
+    depth_kind: DepthKind,
+}
+
+/// How [`Dataset::load_with`] reads a dataset.
+///
+/// ```
+/// use singrav::dataset::{DepthKind, LoadOptions};
+/// let options = LoadOptions { depth_kind: Some(DepthKind::Z), ..LoadOptions::default() };
+/// assert_eq!(options.background, [1.0; 3]);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadOptions {
+    /// What transparent pixels are composited onto (default white).
+    pub background: [f32; 3],
+    /// How the depth maps measure depth; overrides the file's `depth_kind` when given (default
+    /// `None`: the file must say).
+    pub depth_kind: Option<DepthKind>,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        Self {
+            background: [1.0; 3],
+            depth_kind: None,
+        }
+    }
 }
 
 /// One frame's planes, row-major at the dataset's resolution.
@@ -101,8 +151,13 @@ struct FramePixels {
     rgb: Vec<f32>,
     /// Opacity `(h, w)`.
     opacity: Vec<f32>,
-    /// Expected depth in world units `(h, w)`.
+    /// Expected depth in world units `(h, w)`, 0 where left out.
     depth: Vec<f32>,
+    /// 1 where the depth is known, 0 where it is left out of the depth loss `(h, w)`; `None`
+    /// when every pixel's depth is known.
+    depth_mask: Option<Vec<f32>>,
+    /// How many pixels the mask leaves out.
+    depth_left_out: usize,
 }
 
 /// A dataset at one training resolution.
@@ -114,6 +169,10 @@ pub struct DatasetLevel {
     pub depths: Tensor,
     /// Opacity, `(V, 1, h, w)` in [0, 1].
     pub opacity: Tensor,
+    /// How much each pixel's depth counts in the depth loss, `(V, 1, h, w)` in [0, 1]: the
+    /// fraction of the source pixels under it whose depth is known. `None` when every source
+    /// pixel's depth is known (then every pixel counts fully).
+    pub depth_mask: Option<Tensor>,
     /// The cameras at this resolution (same field of view as the files').
     pub cameras: Vec<Camera>,
 }
@@ -123,7 +182,43 @@ impl Dataset {
     /// the checks). `transforms` is the `transforms.json` file or its directory; `background` is
     /// what transparent pixels are composited onto.
     pub fn load(transforms: &Path, background: [f32; 3]) -> Result<Self> {
-        load::load(transforms, background)
+        Self::load_with(
+            transforms,
+            &LoadOptions {
+                background,
+                depth_kind: None,
+            },
+        )
+    }
+
+    /// Loads a dataset as [`Dataset::load`] does, with the depth kind overridable (a dataset
+    /// made elsewhere may not say how its depth is measured).
+    ///
+    /// ```
+    /// use singrav::dataset::{write_dataset, Dataset, DatasetSpec, DepthKind, LoadOptions};
+    /// let dir = tempfile::tempdir()?;
+    /// let spec = DatasetSpec { views: 1, resolution: 8, grid: 8, seed: 1 };
+    /// write_dataset(&singrav::scenes::Islands::new(1), dir.path(), &spec)?;
+    /// let options = LoadOptions { depth_kind: Some(DepthKind::Expected), ..Default::default() };
+    /// let data = Dataset::load_with(dir.path(), &options)?;
+    /// assert_eq!((data.depth_kind(), data.depth_left_out()), (DepthKind::Expected, 0));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn load_with(transforms: &Path, options: &LoadOptions) -> Result<Self> {
+        load::load(transforms, options)
+    }
+
+    /// How the files measured depth (the loaded depth is always expected depth).
+    #[must_use]
+    pub fn depth_kind(&self) -> DepthKind {
+        self.depth_kind
+    }
+
+    /// How many pixels, over all frames, have colour but no depth (the depth map says "no
+    /// surface" where the opacity is above 0) and are left out of the depth loss.
+    #[must_use]
+    pub fn depth_left_out(&self) -> usize {
+        self.frames.iter().map(|f| f.depth_left_out).sum()
     }
 
     /// The number of frames.
@@ -197,6 +292,7 @@ impl Dataset {
             cameras: indices.iter().map(|&i| self.cameras[i]).collect(),
             names: indices.iter().map(|&i| self.names[i].clone()).collect(),
             frames: indices.iter().map(|&i| self.frames[i].clone()).collect(),
+            depth_kind: self.depth_kind,
         })
     }
 
@@ -270,9 +366,27 @@ impl Dataset {
                 .collect()
         };
         let images = resize_all(&|f| f.rgb.chunks_exact(plane).collect());
-        let depths = resize_all(&|f| vec![&f.depth]);
+        let mut depths = resize_all(&|f| vec![&f.depth]);
         let opacity = resize_all(&|f| vec![&f.opacity]);
         let n = self.len();
+        let depth_mask = if self.frames.iter().any(|f| f.depth_mask.is_some()) {
+            let mask: Vec<f32> = self
+                .frames
+                .iter()
+                .flat_map(|f| match &f.depth_mask {
+                    Some(mask) => resize_plane(mask, from, to),
+                    None => vec![1.0; width * height],
+                })
+                .collect();
+            // Left-out pixels hold 0, so the resized depth is the mean over the known ones
+            // times their fraction: divide it back out.
+            for (d, &m) in depths.iter_mut().zip(&mask) {
+                *d = if m > 0.0 { *d / m } else { 0.0 };
+            }
+            Some(Tensor::from_vec(mask, (n, 1, height, width), device)?)
+        } else {
+            None
+        };
         let (sx, sy) = (
             width as f32 / self.width as f32,
             height as f32 / self.height as f32,
@@ -293,6 +407,7 @@ impl Dataset {
             images: Tensor::from_vec(images, (n, 3, height, width), device)?,
             depths: Tensor::from_vec(depths, (n, 1, height, width), device)?,
             opacity: Tensor::from_vec(opacity, (n, 1, height, width), device)?,
+            depth_mask,
             cameras,
         })
     }

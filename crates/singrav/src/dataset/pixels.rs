@@ -93,12 +93,9 @@ pub(super) fn read_depth_exr(path: &Path) -> Result<Pixels<f32>, String> {
         .or_else(|| named("Y"))
         .or_else(|| named("R"))
         .ok_or("the EXR depth map has no channel `Z`, `Y` or `R`")?;
+    // Non-finite values are "no surface" markers or errors depending on the depth kind; the
+    // conversion decides.
     let data: Vec<f32> = channel.sample_data.values_as_f32().collect();
-    if let Some(bad) = data.iter().find(|d| !d.is_finite()) {
-        return Err(format!(
-            "the EXR depth map holds a non-finite depth ({bad})"
-        ));
-    }
     Ok(Pixels {
         width: size.0,
         height: size.1,

@@ -7,7 +7,8 @@
 //!
 //! - each step renders a random batch of rays drawn from all training pixels and takes one
 //!   Adam step on `lambda_color mse(colour) + lambda_depth mse(depth) + lambda_opacity
-//!   mse(opacity)` plus total variation ([`Regularisers`]);
+//!   mse(opacity)` plus total variation ([`Regularisers`]), the depth term weighted by the
+//!   dataset's depth mask (holes count 0);
 //! - coarse to fine: the grid starts at `start_size` and grows geometrically to `size` over the
 //!   first `growth_until` of the budget (trilinear resampling of the raw values);
 //! - an occupancy mask, refreshed every `occupancy_every` steps, kills voxels farther than one
@@ -307,7 +308,8 @@ pub fn fit_volume(
         let colour_mse = (&out.rgb - &batch.rgb)?.sqr()?.mean_all()?;
         let mut loss = (&colour_mse * f64::from(config.lambda_color))?;
         if let Some(depth) = &out.depth {
-            let depth_mse = (depth - &batch.depth)?.sqr()?.mean_all()?;
+            // Holes in the dataset's depth (weight 0) are left out, as training leaves them.
+            let depth_mse = ((depth - &batch.depth)?.sqr()? * &batch.depth_weight)?.mean_all()?;
             loss = (loss + (depth_mse * f64::from(config.lambda_depth))?)?;
         }
         if let Some(opacity) = &out.opacity {

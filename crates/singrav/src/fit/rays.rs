@@ -15,14 +15,18 @@ pub(super) struct RayBank {
     dirs: Vec<[f32; 3]>,
     rgb: Vec<[f32; 3]>,
     depth: Vec<f32>,
+    /// How much each pixel's depth counts (0 where the dataset's depth is a hole).
+    depth_weight: Vec<f32>,
     opacity: Vec<f32>,
 }
 
-/// A random batch of rays and their targets: colour `(B, 3)`, depth and opacity `(B)`.
+/// A random batch of rays and their targets: colour `(B, 3)`, depth, depth weight and opacity
+/// `(B)`.
 pub(super) struct RayBatch {
     pub rays: Rays,
     pub rgb: Tensor,
     pub depth: Tensor,
+    pub depth_weight: Tensor,
     pub opacity: Tensor,
 }
 
@@ -32,11 +36,16 @@ impl RayBank {
         let images: Vec<f32> = level.images.flatten_all()?.to_vec1()?;
         let depth: Vec<f32> = level.depths.flatten_all()?.to_vec1()?;
         let opacity: Vec<f32> = level.opacity.flatten_all()?.to_vec1()?;
+        let depth_weight: Vec<f32> = match &level.depth_mask {
+            Some(mask) => mask.flatten_all()?.to_vec1()?,
+            None => vec![1.0; depth.len()],
+        };
         let mut bank = Self {
             origins: Vec::with_capacity(depth.len()),
             dirs: Vec::with_capacity(depth.len()),
             rgb: Vec::with_capacity(depth.len()),
             depth,
+            depth_weight,
             opacity,
         };
         for (view, camera) in level.cameras.iter().enumerate() {
@@ -71,6 +80,7 @@ impl RayBank {
             )?,
             rgb: Tensor::from_vec(rgb, (count, 3), &Device::Cpu)?,
             depth: Tensor::from_vec(gather(&self.depth), count, &Device::Cpu)?,
+            depth_weight: Tensor::from_vec(gather(&self.depth_weight), count, &Device::Cpu)?,
             opacity: Tensor::from_vec(gather(&self.opacity), count, &Device::Cpu)?,
         })
     }

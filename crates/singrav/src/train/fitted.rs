@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
-use radiance_volume::{Activation, GridDims, RadianceVolume};
+use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume};
 
 use crate::error::{invalid, Result};
 
@@ -20,6 +20,7 @@ pub(super) struct FittedTarget {
     opacity: Tensor,
     /// `(1, 3, s, s, s)`: the fitted colour times the fitted opacity.
     weighted_rgb: Tensor,
+    /// The model's voxel edge at this scale.
     voxel: f64,
 }
 
@@ -37,13 +38,15 @@ impl FittedTarget {
             .narrow(0, 0, 4)?
             .unsqueeze(0)?
             .to_device(device)?;
-        let voxel = 2.0 / size as f64;
-        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, voxel)?;
+        // Opacity across a voxel does not depend on the units: the fit's voxel is measured in
+        // its box (a scene's own coordinates under --bounds), the model's in [-1, 1]^3.
+        let fitted_voxel = f64::from(volume.aabb().size().min_element()) / size as f64;
+        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, fitted_voxel)?;
         let weighted_rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?;
         Ok(Self {
             opacity,
             weighted_rgb,
-            voxel,
+            voxel: 2.0 / size as f64,
         })
     }
 
@@ -60,15 +63,19 @@ impl FittedTarget {
     }
 }
 
-/// Loads a fitted volume for training, checking what training assumes: the default box
-/// `[-1, 1]^3`, a cubic grid, density and RGB channels.
-pub(crate) fn load_fitted(path: &Path) -> Result<RadianceVolume> {
+/// Loads a fitted volume for training, checking what training assumes: the box of the model's
+/// cube (`[-1, 1]^3`, or in a scene's coordinates the cube of its `--bounds`), a cubic grid,
+/// density and RGB channels.
+pub(crate) fn load_fitted(path: &Path, cube: Aabb) -> Result<RadianceVolume> {
     let volume = RadianceVolume::load_safetensors(path)?;
     let dims = volume.dims();
-    let why = if volume.aabb() != radiance_volume::Aabb::CUBE {
+    let why = if volume.aabb() != cube {
         Some(format!(
-            "its box is {:?}; training works in [-1, 1]^3",
-            volume.aabb()
+            "its box is {:?}..{:?}; training's cube is {:?}..{:?} (fit with the run's --bounds)",
+            volume.aabb().min.to_array(),
+            volume.aabb().max.to_array(),
+            cube.min.to_array(),
+            cube.max.to_array()
         ))
     } else if dims.d != dims.h || dims.h != dims.w {
         Some(format!("its grid {:?} is not cubic", dims.xyz()))
@@ -89,7 +96,6 @@ pub(crate) fn load_fitted(path: &Path) -> Result<RadianceVolume> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use radiance_volume::Aabb;
 
     #[test]
     fn loss_is_zero_for_the_fitted_volume_itself_and_grows_with_a_difference() -> Result<()> {

@@ -85,6 +85,14 @@ pub fn train(
         }
         None => dataset,
     };
+    let moved;
+    let dataset = match &config.bounds {
+        Some(bounds) => {
+            moved = dataset.in_model_cube(bounds)?;
+            &moved
+        }
+        None => dataset,
+    };
     let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
     let fitted = load_fitted_target(config, options, run_dir)?;
     let resume = options.resume;
@@ -372,7 +380,10 @@ fn load_fitted_target(
             ))
         }
     };
-    Ok(Some((load_fitted(&path)?, new)))
+    let cube = config
+        .bounds
+        .map_or(radiance_volume::Aabb::CUBE, |bounds| bounds.cube());
+    Ok(Some((load_fitted(&path, cube)?, new)))
 }
 
 /// The tensors under `prefix`, with the prefix removed.

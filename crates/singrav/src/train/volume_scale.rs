@@ -62,6 +62,14 @@ pub(super) fn mse(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     Ok((a - b)?.sqr()?.mean_all()?)
 }
 
+/// Mean squared error of two equally shaped tensors weighted by `mask` (same shape, >= 0):
+/// pixels without known depth do not count; 0 when nothing counts.
+fn masked_mse(a: &Tensor, b: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    let weighted = ((a - b)?.sqr()? * mask)?.sum_all()?;
+    let count = mask.sum_all()?.maximum(1e-6)?;
+    Ok((weighted / count)?)
+}
+
 impl<'a> VolumeScale<'a> {
     /// Sets up scale `n` (its generator already pushed onto `model`) on top of the frozen
     /// reconstruction `V*_{n-1}` (`None` at n = 1).
@@ -215,7 +223,11 @@ impl Stage for VolumeScale<'_> {
             total = (total + color)?;
             if let Some(depth) = depth {
                 let real_depth = select(&self.real, &rec_views)?.narrow(1, 3, 1)?;
-                let depth = (mse(&depth, &real_depth)? * self.config.lambda_depth)?;
+                let error = match &self.level.depth_mask {
+                    None => mse(&depth, &real_depth)?,
+                    Some(mask) => masked_mse(&depth, &real_depth, &select(mask, &rec_views)?)?,
+                };
+                let depth = (error * self.config.lambda_depth)?;
                 depth_sum += depth.to_scalar::<f32>()?;
                 total = (total + depth)?;
             }
@@ -274,4 +286,27 @@ pub(super) fn reconstruction_rmse(
 /// Where a picture of a scale's samples goes.
 pub(super) fn picture_path(run_dir: &Path, scale: usize) -> std::path::PathBuf {
     run_dir.join("samples").join(format!("scale_{scale}.png"))
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{Device, Tensor};
+
+    use super::masked_mse;
+
+    #[test]
+    fn masked_mse_counts_only_known_pixels() {
+        let t = |v: &[f32]| Tensor::new(v, &Device::Cpu).unwrap();
+        // Errors 1, 2, 3, 4 with weights 1, 0.5, 0, 1: (1 + 0.5 * 4 + 16) / 2.5 = 7.6.
+        let loss = masked_mse(
+            &t(&[1.0, 2.0, 3.0, 4.0]),
+            &t(&[0.0; 4]),
+            &t(&[1.0, 0.5, 0.0, 1.0]),
+        )
+        .unwrap();
+        assert!((loss.to_scalar::<f32>().unwrap() - 7.6).abs() < 1e-6);
+        // Nothing known: no loss rather than NaN.
+        let none = masked_mse(&t(&[1.0]), &t(&[0.0]), &t(&[0.0])).unwrap();
+        assert_eq!(none.to_scalar::<f32>().unwrap(), 0.0);
+    }
 }

@@ -1,0 +1,164 @@
+//! Scenes outside the unit cube: a dataset moved and scaled in space, told where its scene is,
+//! trains on exactly the cameras and depth of the original; `auto` finds the box from the
+//! depth maps; boxes that cannot be right are refused.
+
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use glam::Vec3;
+use serde_json::Value;
+use singrav::dataset::{write_dataset, Dataset, DatasetSpec, SceneBounds};
+use singrav::scenes::SceneKind;
+
+const SPEC: DatasetSpec = DatasetSpec {
+    views: 6,
+    resolution: 24,
+    grid: 32,
+    seed: 3,
+};
+/// The move: world = SCALE * original + SHIFT.
+const SCALE: f32 = 2.5;
+const SHIFT: Vec3 = Vec3::new(10.0, -4.0, 1.5);
+
+fn values(t: &Tensor) -> Vec<f32> {
+    t.flatten_all().unwrap().to_vec1().unwrap()
+}
+
+/// The test dataset written to `dir`, and a copy of it in `moved` with every camera moved by
+/// the similarity and the depth unit scaled with it.
+fn original_and_moved(dir: &Path, moved: &Path) {
+    write_dataset(&*SceneKind::Mushrooms.build(1), dir, &SPEC).unwrap();
+    for sub in ["images", "depth"] {
+        std::fs::create_dir_all(moved.join(sub)).unwrap();
+        for entry in std::fs::read_dir(dir.join(sub)).unwrap() {
+            let entry = entry.unwrap();
+            std::fs::copy(entry.path(), moved.join(sub).join(entry.file_name())).unwrap();
+        }
+    }
+    let text = std::fs::read_to_string(dir.join("transforms.json")).unwrap();
+    let mut root: Value = serde_json::from_str(&text).unwrap();
+    root["depth_scale"] = (root["depth_scale"].as_f64().unwrap() * f64::from(SCALE)).into();
+    for frame in root["frames"].as_array_mut().unwrap() {
+        let m = &mut frame["transform_matrix"];
+        for (r, shift) in SHIFT.to_array().into_iter().enumerate() {
+            let t = m[r][3].as_f64().unwrap() as f32;
+            m[r][3] = f64::from(t * SCALE + shift).into();
+        }
+    }
+    std::fs::write(moved.join("transforms.json"), root.to_string()).unwrap();
+}
+
+fn moved_box(lo: f32, hi: f32) -> SceneBounds {
+    SceneBounds::new(
+        (Vec3::splat(lo) * SCALE + SHIFT).to_array(),
+        (Vec3::splat(hi) * SCALE + SHIFT).to_array(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_moved_scene_told_its_bounds_trains_on_the_original_cameras_and_depth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, moved) = (tmp.path().join("a"), tmp.path().join("b"));
+    original_and_moved(&dir, &moved);
+    let original = Dataset::load(&dir, [1.0; 3]).unwrap();
+    let mapped = Dataset::load(&moved, [1.0; 3])
+        .unwrap()
+        .in_model_cube(&moved_box(-1.0, 1.0))
+        .unwrap();
+    for (a, b) in original.cameras().iter().zip(mapped.cameras()) {
+        assert!(a.c2w.abs_diff_eq(b.c2w, 1e-5), "{:?} vs {:?}", a.c2w, b.c2w);
+    }
+    let level = |d: &Dataset| d.level(24, 24, &Device::Cpu).unwrap();
+    let (a, b) = (level(&original), level(&mapped));
+    for (x, y) in values(&a.depths).iter().zip(&values(&b.depths)) {
+        assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+    }
+    assert_eq!(values(&a.images), values(&b.images));
+
+    // The model's cube lands on the box (a cube here) in the scene.
+    let cube = moved_box(-1.0, 1.0).cube();
+    assert!((cube.min - (SHIFT - Vec3::splat(SCALE))).length() < 1e-5);
+    assert!((cube.max - (SHIFT + Vec3::splat(SCALE))).length() < 1e-5);
+}
+
+#[test]
+fn auto_bounds_follow_the_scene() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, moved) = (tmp.path().join("a"), tmp.path().join("b"));
+    original_and_moved(&dir, &moved);
+    let here = Dataset::load(&dir, [1.0; 3])
+        .unwrap()
+        .auto_bounds()
+        .unwrap();
+    let there = Dataset::load(&moved, [1.0; 3])
+        .unwrap()
+        .auto_bounds()
+        .unwrap();
+    for a in 0..3 {
+        for (h, t) in [(here.min[a], there.min[a]), (here.max[a], there.max[a])] {
+            let want = h * SCALE + SHIFT[a];
+            assert!((t - want).abs() < 1e-3 * SCALE, "axis {a}: {t} vs {want}");
+        }
+    }
+    // The mushrooms stand on the ground of [-1, 1]^3 (z near -1), well inside the cube.
+    assert!(here.min[2] > -1.2 && here.max[2] < 1.0, "{here}");
+    assert!(
+        here.min.iter().zip(&here.max).all(|(lo, hi)| hi - lo > 0.3),
+        "{here}"
+    );
+}
+
+#[test]
+fn boxes_that_cannot_hold_the_scene_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, moved) = (tmp.path().join("a"), tmp.path().join("b"));
+    original_and_moved(&dir, &moved);
+    let data = Dataset::load(&moved, [1.0; 3]).unwrap();
+    // The cameras are 3.5 from the scene's centre: a box of half side 4 holds them.
+    let msg = data
+        .in_model_cube(&moved_box(-4.0, 4.0))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("inside the box") && msg.contains("images/r_"),
+        "{msg}"
+    );
+    // The unmoved box is far from every camera's view.
+    let msg = data
+        .in_model_cube(&SceneBounds::new([-1.0; 3], [1.0; 3]).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("no camera sees"), "{msg}");
+    for bad in ["1,2,3", "0,0,0,1,1,x", "0,0,0,1,-1,1", "0,0,0,1,1,inf"] {
+        let msg = bad.parse::<SceneBounds>().unwrap_err().to_string();
+        assert!(msg.contains("bounds"), "{bad}: {msg}");
+    }
+}
+
+#[test]
+fn volumes_of_a_run_with_bounds_sit_on_its_cube_with_density_in_scene_units() {
+    use rand::SeedableRng;
+    let plain = singrav::TrainConfig::preset("micro").unwrap();
+    let bounds = moved_box(-1.0, 0.6);
+    let placed = singrav::TrainConfig {
+        bounds: Some(bounds),
+        ..plain.clone()
+    };
+    let model = |c| {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+        singrav::SinGrav::new(c, &Device::Cpu, &mut rng).unwrap()
+    };
+    let raw = Tensor::randn(0f32, 2.0, (1, 4, 5, 5, 5), &Device::Cpu).unwrap();
+    let a = model(&plain).to_physical(&raw).unwrap();
+    let b = model(&placed).to_physical(&raw).unwrap();
+    assert_eq!(a.aabb(), radiance_volume::Aabb::CUBE);
+    assert_eq!(b.aabb(), bounds.cube());
+    // Half side 0.8 x 2.5 = 2: the density halves, colour is unchanged.
+    assert_eq!(bounds.half_side(), 2.0);
+    let (da, db) = (values(&a.density().unwrap()), values(&b.density().unwrap()));
+    for (x, y) in da.iter().zip(&db) {
+        assert!((x / 2.0 - y).abs() <= 1e-6 * x.abs(), "{x} vs {y}");
+    }
+    assert_eq!(values(&a.rgb().unwrap()), values(&b.rgb().unwrap()));
+}
