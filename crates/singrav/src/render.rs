@@ -117,7 +117,8 @@ impl ViewRenderer {
     }
 }
 
-/// Colour, depth and opacity of renderings, each `(V, C, h, w)`.
+/// Colour, depth and opacity of renderings, each `(V, C, h, w)`, as
+/// [`ViewRenderer::render_maps`] and [`crate::SinGrav::render_maps`] return them.
 #[derive(Debug, Clone)]
 pub struct ViewMaps {
     /// Colour `(V, 3, h, w)`, composited on the background.

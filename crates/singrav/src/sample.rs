@@ -152,6 +152,16 @@ impl SinGrav {
     /// Like [`SinGrav::render_raw`], with the expected depth in world units and the opacity of
     /// the 3D rendering: colour `(V, 3, H, W)` at the final size (through G_N when trained),
     /// depth and opacity `(V, 1, h, w)` at [`SinGrav::render_size`] (G_N makes colour only).
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let cameras = singrav::sample::showcase_cameras(2, model.render_size())?;
+    /// let maps = model.render_maps(&model.reconstruct()?, &cameras)?;
+    /// let size = model.render_size();
+    /// assert_eq!(maps.opacity.dims(), &[2, 1, size, size]);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
     pub fn render_maps(&self, raw: &Tensor, cameras: &[Camera]) -> Result<ViewMaps> {
         let refs: Vec<&Camera> = cameras.iter().collect();
         let maps = self.final_renderer().render_maps(raw, &refs)?;
