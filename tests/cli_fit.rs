@@ -5,29 +5,12 @@
 use radiance_volume::RadianceVolume;
 
 mod common;
-use common::{failure, ok, path, volgen};
-
-fn stones(root: &std::path::Path) -> std::path::PathBuf {
-    let data = root.join("data");
-    ok(&volgen(&[
-        "scene",
-        "stones",
-        "--out",
-        path(&data),
-        "--views",
-        "6",
-        "--resolution",
-        "36",
-        "--grid",
-        "32",
-    ]));
-    data
-}
+use common::{assert_vdb_matches, failure, ok, path, stones_dataset, volgen};
 
 #[test]
 fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = stones(tmp.path());
+    let data = stones_dataset(tmp.path());
     let out = tmp.path().join("fit/stones.safetensors");
     let text = ok(&volgen(&[
         "fit",
@@ -66,22 +49,7 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     assert_eq!(views[4]["held_out"], true);
     let volume = RadianceVolume::load_safetensors(&out).unwrap();
     assert_eq!(volume.dims().xyz(), [16, 16, 16]);
-    let from_vdb =
-        RadianceVolume::read_vdb(tmp.path().join("fit/stones.vdb"), volume.grid()).unwrap();
-    let density = |v: &RadianceVolume| -> Vec<f32> {
-        v.density()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap()
-    };
-    let (written, read) = (density(&volume), density(&from_vdb));
-    let top = written.iter().fold(1f32, |m, v| m.max(*v));
-    assert!(written
-        .iter()
-        .zip(&read)
-        .all(|(a, b)| (a - b).abs() <= 1e-5 * top));
+    assert_vdb_matches(&volume, &tmp.path().join("fit/stones.vdb"));
     assert!(tmp.path().join("fit/exr/stones.json").is_file());
     let picture = image::open(tmp.path().join("fit/stones.png")).unwrap();
     // Two rows (real, fitted) of three 36-pixel views, with 2-pixel gaps around each.
@@ -163,7 +131,7 @@ fn fit_names_bad_input() {
         path(&tmp.path().join("v.safetensors")),
     ]));
     assert!(err.contains("nowhere"), "{err}");
-    let data = stones(tmp.path());
+    let data = stones_dataset(tmp.path());
     let run = |extra: &[&str]| {
         let mut args = vec!["fit", path(&data), "--steps", "2", "--size", "8"];
         args.extend_from_slice(extra);

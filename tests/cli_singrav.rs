@@ -7,7 +7,7 @@ use std::path::Path;
 use radiance_volume::RadianceVolume;
 
 mod common;
-use common::{failure, ok, path, train_micro, volgen};
+use common::{assert_vdb_matches, failure, ok, path, train_micro, volgen};
 
 #[test]
 fn demo_writes_dataset_model_samples_pictures_and_summary() {
@@ -50,26 +50,7 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
     assert!(overview.height() > overview.width() / 3 * 2 / 3);
     // The VDB export reads back through an independent reader and matches the volume.
     let volume = RadianceVolume::load_safetensors(out.join("samples/scene_0.safetensors")).unwrap();
-    let from_vdb =
-        RadianceVolume::read_vdb(out.join("samples/scene_0.vdb"), volume.grid()).unwrap();
-    let density = |v: &RadianceVolume| -> Vec<f32> {
-        v.density()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap()
-    };
-    let (written, read) = (density(&volume), density(&from_vdb));
-    let worst = written
-        .iter()
-        .zip(&read)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0f32, f32::max);
-    assert!(
-        worst <= 1e-5 * written.iter().fold(1f32, |m, v| m.max(*v)),
-        "density differs by {worst}"
-    );
+    assert_vdb_matches(&volume, &out.join("samples/scene_0.vdb"));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["scale_seconds"].as_array().unwrap().len(), 3);

@@ -38,10 +38,9 @@ pub fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Renders a tiny stones dataset (6 views at 36^2) into `root/data` and trains the `micro`
-/// preset on it into `root/run`; returns `(data, run)`.
-pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let (data, run) = (root.join("data"), root.join("run"));
+/// Renders a tiny stones dataset (6 views at 36^2) into `root/data`; returns its directory.
+pub fn stones_dataset(root: &Path) -> std::path::PathBuf {
+    let data = root.join("data");
     ok(&volgen(&[
         "scene",
         "stones",
@@ -54,6 +53,13 @@ pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
         "--grid",
         "32",
     ]));
+    data
+}
+
+/// Renders a tiny stones dataset (6 views at 36^2) into `root/data` and trains the `micro`
+/// preset on it into `root/run`; returns `(data, run)`.
+pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (data, run) = (stones_dataset(root), root.join("run"));
     ok(&volgen(&[
         "train",
         path(&data),
@@ -63,4 +69,29 @@ pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
         "micro",
     ]));
     (data, run)
+}
+
+/// Asserts that the VDB file `vdb` holds the density of `volume` (read back through vdb-rs, an
+/// independent reader), to 1e-5 of its largest value.
+pub fn assert_vdb_matches(volume: &radiance_volume::RadianceVolume, vdb: &Path) {
+    let from_vdb = radiance_volume::RadianceVolume::read_vdb(vdb, volume.grid()).unwrap();
+    let density = |v: &radiance_volume::RadianceVolume| -> Vec<f32> {
+        v.density()
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap()
+    };
+    let (written, read) = (density(volume), density(&from_vdb));
+    let worst = written
+        .iter()
+        .zip(&read)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(
+        worst <= 1e-5 * written.iter().fold(1f32, |m, v| m.max(*v)),
+        "{}: density differs by {worst}",
+        vdb.display()
+    );
 }
