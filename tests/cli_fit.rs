@@ -145,7 +145,7 @@ fn fit_names_bad_input() {
         err.contains("v.vdb") && err.contains(".safetensors"),
         "{err}"
     );
-    let err = run(&["--out", path(&out), "--start-size", "30"]);
+    let err = run(&["--out", path(&out), "--start-size", "1"]);
     assert!(err.contains("start_size"), "{err}");
     let err = run(&["--out", path(&out), "--seconds", "3"]);
     assert!(

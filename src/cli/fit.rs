@@ -181,9 +181,7 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
     };
     let config = FitConfig {
         size: args.size,
-        start_size: args
-            .start_size
-            .unwrap_or_else(|| defaults.start_size.min(args.size)),
+        start_size: args.start_size.unwrap_or(defaults.start_size),
         budget,
         rays_per_step: args.rays,
         regularisers: singrav::fit::Regularisers {

@@ -159,7 +159,6 @@ fn fit_for_training(
     let defaults = singrav::fit::FitConfig::default();
     let fit_config = singrav::fit::FitConfig {
         size,
-        start_size: defaults.start_size.min(size),
         activation: config.activation(),
         background: config.background,
         use_depth: config.use_depth,

@@ -70,7 +70,6 @@ fn main() -> Result<()> {
     for size in sizes {
         let config = FitConfig {
             size,
-            start_size: FitConfig::default().start_size.min(size),
             ..FitConfig::default()
         };
         let started = Instant::now();

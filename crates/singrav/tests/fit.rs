@@ -104,7 +104,7 @@ fn bad_settings_and_views_are_named() {
     assert!(err.contains("size"), "{err}");
     let err = fit(
         FitConfig {
-            start_size: 80,
+            start_size: 1,
             ..FitConfig::default()
         },
         &[0],

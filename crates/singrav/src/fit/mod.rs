@@ -64,7 +64,7 @@ pub enum FitBudget {
 pub struct FitConfig {
     /// Edge of the final grid in voxels.
     pub size: usize,
-    /// Edge of the grid the fit starts from (at most `size`).
+    /// Edge of the grid the fit starts from (a fit with a smaller `size` starts at `size`).
     pub start_size: usize,
     /// Fraction of the budget by which the grid has grown to `size`.
     pub growth_until: f32,
@@ -140,11 +140,7 @@ impl FitConfig {
     pub fn validate(&self) -> Result<()> {
         let checks = [
             (self.size >= 2, "size", "at least 2 voxels"),
-            (
-                (2..=self.size).contains(&self.start_size),
-                "start_size",
-                "between 2 and size",
-            ),
+            (self.start_size >= 2, "start_size", "at least 2 voxels"),
             (
                 (0.0..=1.0).contains(&self.growth_until),
                 "growth_until",
