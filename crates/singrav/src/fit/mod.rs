@@ -23,11 +23,11 @@
 //! let spec = DatasetSpec { views: 6, resolution: 16, grid: 16, seed: 1 };
 //! write_dataset(&singrav::scenes::StandingStones::new(1), dir.path(), &spec)?;
 //! let data = Dataset::load(dir.path(), [1.0; 3])?;
-//! let config = FitConfig { size: 12, budget: FitBudget::Steps(40), rays_per_step: 512, ..FitConfig::default() };
+//! let config = FitConfig { size: 12, budget: FitBudget::Steps(150), rays_per_step: 1024, ..FitConfig::default() };
 //! let fitted = fit_volume(&data, &[0, 1, 2, 3, 4, 5], &config, &mut |_| {})?;
 //! assert_eq!(fitted.volume.dims().xyz(), [12, 12, 12]);
 //! let psnr = view_psnr(&fitted.volume, &data, &[0], &config)?;
-//! assert!(psnr[0] > 10.0, "{psnr:?}");
+//! assert!(psnr[0] > 15.0, "{psnr:?}"); // a grey fog scores about 9 dB
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
