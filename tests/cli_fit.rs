@@ -5,7 +5,7 @@
 use radiance_volume::RadianceVolume;
 
 mod common;
-use common::{assert_vdb_matches, failure, ok, path, stones_dataset, volgen};
+use common::{assert_vdb_matches, failure, ok, path, stones_dataset, train_micro_with, volgen};
 
 #[test]
 fn fit_writes_the_volume_its_views_and_a_psnr_report() {
@@ -60,18 +60,11 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
 
     // Train against it: the log has the 3D term, the run keeps a copy and records the weight.
     let run = tmp.path().join("run");
-    ok(&volgen(&[
-        "train",
-        path(&data),
-        "--out",
-        path(&run),
-        "--preset",
-        "micro",
-        "--fitted",
-        path(&out),
-        "--lambda-fitted",
-        "5",
-    ]));
+    train_micro_with(
+        &data,
+        &run,
+        &["--fitted", path(&out), "--lambda-fitted", "5"],
+    );
     let config: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["lambda_fitted"], 5.0);
@@ -85,34 +78,20 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
             .count()
             < log.lines().count()
     );
-    // A resume finds the run's own copy without being told again.
-    ok(&volgen(&[
-        "train",
-        path(&data),
-        "--out",
-        path(&run),
-        "--preset",
-        "micro",
-        "--fitted",
-        path(&out),
-        "--lambda-fitted",
-        "5",
-        "--resume",
-    ]));
+    // A resume uses the run's own copy: the original file may be gone, and --fit does not
+    // fit again.
+    std::fs::rename(&out, tmp.path().join("moved.safetensors")).unwrap();
+    train_micro_with(&data, &run, &["--fit", "--lambda-fitted", "5", "--resume"]);
+    let kept = RadianceVolume::load_safetensors(run.join("fitted.safetensors")).unwrap();
+    assert_eq!(
+        kept.dims().xyz(),
+        [16, 16, 16],
+        "the copy of the 16^3 fit, not a new fit"
+    );
 
     // --fit fits first, into the run.
     let run2 = tmp.path().join("run2");
-    ok(&volgen(&[
-        "train",
-        path(&data),
-        "--out",
-        path(&run2),
-        "--preset",
-        "micro",
-        "--fit",
-        "--fit-steps",
-        "5",
-    ]));
+    train_micro_with(&data, &run2, &["--fit", "--fit-steps", "5"]);
     let fitted = RadianceVolume::load_safetensors(run2.join("fitted.safetensors")).unwrap();
     assert_eq!(
         fitted.dims().xyz(),

@@ -60,15 +60,15 @@ pub fn stones_dataset(root: &Path) -> std::path::PathBuf {
 /// preset on it into `root/run`; returns `(data, run)`.
 pub fn train_micro(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let (data, run) = (stones_dataset(root), root.join("run"));
-    ok(&volgen(&[
-        "train",
-        path(&data),
-        "--out",
-        path(&run),
-        "--preset",
-        "micro",
-    ]));
+    train_micro_with(&data, &run, &[]);
     (data, run)
+}
+
+/// Trains the `micro` preset on `data` into `run` with `extra` arguments; returns stdout.
+pub fn train_micro_with(data: &Path, run: &Path, extra: &[&str]) -> String {
+    let mut args = vec!["train", path(data), "--out", path(run), "--preset", "micro"];
+    args.extend_from_slice(extra);
+    ok(&volgen(&args))
 }
 
 /// Asserts that the VDB file `vdb` holds the density of `volume` (read back through vdb-rs, an

@@ -32,6 +32,8 @@ pub(super) struct FitGrid {
     /// Per voxel (z, y, x): whether its density is rendered; dead voxels render as exactly
     /// empty (so the renderer skips them) and are not updated.
     live: Vec<bool>,
+    /// How many entries of `live` are set (kept so progress reports need no count per step).
+    live_count: usize,
     activation: Activation,
 }
 
@@ -72,6 +74,7 @@ impl FitGrid {
             raw,
             adam_steps: 0,
             live: vec![true; voxels],
+            live_count: voxels,
             activation,
         }
     }
@@ -87,7 +90,7 @@ impl FitGrid {
 
     /// The fraction of voxels that are live.
     pub(super) fn live_fraction(&self) -> f32 {
-        self.live.iter().filter(|&&l| l).count() as f32 / self.voxels() as f32
+        self.live_count as f32 / self.voxels() as f32
     }
 
     /// The physical `(4, s, s, s)` values: `sigma = scale softplus(raw + shift)` on live voxels
@@ -207,8 +210,8 @@ impl FitGrid {
             .par_iter()
             .map(|&r| scale * softplus(r + shift) >= threshold_sigma)
             .collect();
-        let dilated = dilate(&dense, s);
-        self.live = dilated;
+        self.live = dilate(&dense, s);
+        self.live_count = self.live.iter().filter(|&&l| l).count();
     }
 
     /// Resamples the raw grid to edge `size` (trilinear, cell-centred) and resets the Adam
