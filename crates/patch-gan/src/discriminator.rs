@@ -3,8 +3,9 @@
 use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;
 
-use crate::conv::{conv2d, Conv2d, ConvConfig};
+use crate::conv::{conv2d, op, Conv2d, ConvConfig};
 use crate::error::{invalid, Result};
+use crate::fused::bias_leaky_relu;
 use crate::norm::{leaky_relu, LEAKY_SLOPE};
 
 /// Kernel size of every discriminator layer.
@@ -155,7 +156,11 @@ impl Module for PatchDiscriminator2d {
         }
         let mut x = xs.clone();
         for conv in &self.blocks {
-            x = leaky_relu(&conv.forward(&x)?, LEAKY_SLOPE)?;
+            let convolved = op::conv2d(&x, conv.weight(), conv.config())?;
+            x = match conv.bias() {
+                Some(bias) => bias_leaky_relu(&convolved, bias, LEAKY_SLOPE)?,
+                None => leaky_relu(&convolved, LEAKY_SLOPE)?,
+            };
         }
         self.tail.forward(&x)
     }

@@ -3,9 +3,9 @@
 use candle_core::{ModuleT, Tensor};
 use candle_nn::{Module, VarBuilder};
 
-use crate::conv::{conv3d, Conv3d, ConvConfig};
+use crate::conv::{conv3d, op, Conv3d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::norm::{batch_norm3d, leaky_relu, BatchNorm3d, LEAKY_SLOPE};
+use crate::norm::{batch_norm3d, BatchNorm3d, LEAKY_SLOPE};
 
 /// Shape of a [`Generator3d`]. The default is the paper's G_1 with L = 5 (table "generators"):
 /// 3 input channels (noise plus the CSG grid), 32 hidden channels, 4 output channels
@@ -187,7 +187,10 @@ impl ModuleT for Generator3d {
     fn forward_t(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
         let mut h = xs.clone();
         for (conv, bn) in &self.blocks {
-            h = leaky_relu(&bn.forward_t(&conv.forward(&h)?, train)?, LEAKY_SLOPE)?;
+            // The convolution's bias goes to the fused BatchNorm + LeakyReLU, which needs it in
+            // eval mode only (batch statistics cancel it).
+            let convolved = op::conv3d(&h, conv.weight(), conv.config())?;
+            h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
         }
         self.tail.forward(&h)
     }

@@ -40,10 +40,13 @@
 
 mod conv;
 mod discriminator;
+mod element;
 mod error;
+mod fused;
 mod generator;
 mod init;
 mod norm;
+mod storage;
 mod upsampler;
 mod wgan;
 
@@ -55,6 +58,7 @@ pub mod functional {
 pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv2d, Conv3d, ConvConfig};
 pub use discriminator::{receptive_field, PatchDiscriminator2d, PatchDiscriminator2dConfig};
 pub use error::{Error, Result};
+pub use fused::bias_leaky_relu;
 pub use generator::{Generator3d, Generator3dConfig};
 pub use norm::{batch_norm3d, leaky_relu, BatchNorm3d, InstanceNorm2d, LEAKY_SLOPE, NORM_EPS};
 pub use upsampler::{upsample_bilinear2x, Upsampler2d, Upsampler2dConfig};

@@ -1,9 +1,11 @@
 //! Normalisation layers: `BatchNorm3d` (train and eval) and `InstanceNorm2d`.
 
-use candle_core::{ModuleT, Tensor};
-use candle_nn::{BatchNorm, BatchNormConfig, Module, VarBuilder};
+use candle_core::{DType, ModuleT, Tensor, Var};
+use candle_nn::{Init, Module, VarBuilder};
 
 use crate::error::{invalid, Result};
+pub use crate::fused::leaky_relu;
+use crate::fused::{batch_norm_act, NormStats};
 
 /// PyTorch's default `eps` for both normalisations.
 pub const NORM_EPS: f64 = 1e-5;
@@ -27,23 +29,60 @@ pub const NORM_EPS: f64 = 1e-5;
 /// assert_eq!(y.dims(), x.dims());
 /// # Ok::<(), patch_gan::Error>(())
 /// ```
+///
+/// On the CPU the normalisation and an optional LeakyReLU after it run as one fused op
+/// ([`BatchNorm3d::forward_activated`], which the generators use); other devices run candle ops.
 #[derive(Debug, Clone)]
-pub struct BatchNorm3d(BatchNorm);
+pub struct BatchNorm3d {
+    weight: Tensor,
+    bias: Tensor,
+    running_mean: Var,
+    running_var: Var,
+}
+
+/// PyTorch's default momentum of the running statistics.
+const MOMENTUM: f64 = 0.1;
 
 impl BatchNorm3d {
     /// The running mean, `(C,)`.
     pub fn running_mean(&self) -> &Tensor {
-        self.0.running_mean()
+        self.running_mean.as_tensor()
     }
 
     /// The running (unbiased) variance, `(C,)`.
     pub fn running_var(&self) -> &Tensor {
-        self.0.running_var()
+        self.running_var.as_tensor()
     }
-}
 
-impl ModuleT for BatchNorm3d {
-    fn forward_t(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
+    /// `LeakyReLU(BatchNorm(xs + input_bias))` with the given negative slope (1 is no
+    /// activation), `input_bias` `(C,)` being the bias of the convolution before this layer.
+    ///
+    /// In train mode the batch statistics absorb any per-channel constant, so the bias changes
+    /// neither the output nor (being then exactly without gradient) the loss: it is only folded
+    /// into the running mean, where PyTorch's convolution + BatchNorm would leave it, and the
+    /// convolution saves adding it. In eval mode it is added to the input.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, ModuleT, Tensor};
+    /// use candle_nn::{VarBuilder, VarMap};
+    /// let varmap = VarMap::new();
+    /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    /// let bn = patch_gan::batch_norm3d(2, vb.pp("bn"))?;
+    /// let x = Tensor::arange(0f32, 16., &Device::Cpu)?.reshape((1, 2, 2, 2, 2))?;
+    /// let bias = Tensor::new(&[5f32, -5.], &Device::Cpu)?;
+    /// let fused = bn.forward_activated(&x, Some(&bias), 0.2, true)?;
+    /// let plain = patch_gan::leaky_relu(&bn.forward_t(&x, true)?, 0.2)?;
+    /// let diff = (fused - plain)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+    /// assert!(diff < 1e-6);
+    /// # Ok::<(), candle_core::Error>(())
+    /// ```
+    pub fn forward_activated(
+        &self,
+        xs: &Tensor,
+        input_bias: Option<&Tensor>,
+        negative_slope: f64,
+        train: bool,
+    ) -> candle_core::Result<Tensor> {
         if xs.rank() != 5 {
             return Err(invalid(
                 "BatchNorm3d input",
@@ -51,7 +90,108 @@ impl ModuleT for BatchNorm3d {
             )
             .into());
         }
-        self.0.forward_t(xs, train)
+        let channels = self.weight.dim(0)?;
+        let with_bias = |xs: &Tensor| match input_bias {
+            Some(b) => xs.broadcast_add(&b.reshape((1, channels, 1, 1, 1))?),
+            None => Ok(xs.clone()),
+        };
+        if !xs.device().is_cpu() {
+            return leaky_relu(
+                &self.candle_forward(&with_bias(xs)?, train)?,
+                negative_slope,
+            );
+        }
+        if !train {
+            let stats = NormStats::Running {
+                mean: to_f64(self.running_mean())?,
+                var: to_f64(self.running_var())?,
+            };
+            let xs = with_bias(xs)?;
+            let (ys, _) = batch_norm_act(
+                &xs,
+                &self.weight,
+                &self.bias,
+                stats,
+                NORM_EPS,
+                negative_slope,
+            )?;
+            return Ok(ys);
+        }
+        let (ys, stats) = batch_norm_act(
+            xs,
+            &self.weight,
+            &self.bias,
+            NormStats::Batch,
+            NORM_EPS,
+            negative_slope,
+        )?;
+        if let Some(stats) = stats {
+            let shift = match input_bias {
+                Some(b) => to_f64(b)?,
+                None => vec![0.0; channels],
+            };
+            let mean: Vec<f64> = stats.mean.iter().zip(&shift).map(|(m, b)| m + b).collect();
+            let unbiased = stats.count as f64 / (stats.count.max(2) - 1) as f64;
+            let var: Vec<f64> = stats.var.iter().map(|v| v * unbiased).collect();
+            self.update_running(&mean, &var)?;
+        }
+        Ok(ys)
+    }
+
+    /// `running = (1 - momentum) running + momentum batch` for both statistics.
+    fn update_running(&self, mean: &[f64], var: &[f64]) -> candle_core::Result<()> {
+        for (running, batch) in [(&self.running_mean, mean), (&self.running_var, var)] {
+            let old = to_f64(running.as_tensor())?;
+            let new: Vec<f64> = old
+                .iter()
+                .zip(batch)
+                .map(|(o, b)| (1.0 - MOMENTUM) * o + MOMENTUM * b)
+                .collect();
+            let dev = running.device();
+            running.set(&Tensor::from_vec(new, batch.len(), dev)?.to_dtype(running.dtype())?)?;
+        }
+        Ok(())
+    }
+
+    /// The same layer in candle ops, for devices without the fused kernel (running statistics are
+    /// updated by the CPU path only).
+    fn candle_forward(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
+        let per_channel = |t: &Tensor| t.reshape((1, (), 1, 1, 1));
+        let (mean, var) = if train {
+            let mean = xs
+                .mean_keepdim(4)?
+                .mean_keepdim(3)?
+                .mean_keepdim(2)?
+                .mean_keepdim(0)?;
+            let centred = xs.broadcast_sub(&mean)?;
+            let var = centred
+                .sqr()?
+                .mean_keepdim(4)?
+                .mean_keepdim(3)?
+                .mean_keepdim(2)?
+                .mean_keepdim(0)?;
+            (mean, var)
+        } else {
+            (
+                per_channel(self.running_mean())?,
+                per_channel(self.running_var())?,
+            )
+        };
+        xs.broadcast_sub(&mean)?
+            .broadcast_div(&(var + NORM_EPS)?.sqrt()?)?
+            .broadcast_mul(&per_channel(&self.weight)?)?
+            .broadcast_add(&per_channel(&self.bias)?)
+    }
+}
+
+/// A small tensor's values as f64.
+fn to_f64(t: &Tensor) -> candle_core::Result<Vec<f64>> {
+    t.to_dtype(DType::F64)?.to_vec1::<f64>()
+}
+
+impl ModuleT for BatchNorm3d {
+    fn forward_t(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
+        self.forward_activated(xs, None, 1.0, train)
     }
 }
 
@@ -60,13 +200,16 @@ pub fn batch_norm3d(channels: usize, vb: VarBuilder) -> Result<BatchNorm3d> {
     if channels == 0 {
         return Err(invalid("BatchNorm3d channels", "must be positive"));
     }
-    let config = BatchNormConfig {
-        eps: NORM_EPS,
-        remove_mean: true,
-        affine: true,
-        momentum: 0.1,
-    };
-    Ok(BatchNorm3d(candle_nn::batch_norm(channels, config, vb)?))
+    let running_mean = vb.get_with_hints(channels, "running_mean", Init::Const(0.))?;
+    let running_var = vb.get_with_hints(channels, "running_var", Init::Const(1.))?;
+    Ok(BatchNorm3d {
+        weight: vb.get_with_hints(channels, "weight", Init::Const(1.))?,
+        bias: vb.get_with_hints(channels, "bias", Init::Const(0.))?,
+        // The variables of the VarMap themselves (from_tensor of a variable shares its storage),
+        // so updating them updates what a checkpoint saves.
+        running_mean: Var::from_tensor(&running_mean)?,
+        running_var: Var::from_tensor(&running_var)?,
+    })
 }
 
 /// Instance normalisation of `(N, C, H, W)` images: each `(n, c)` plane is shifted to mean 0 and
@@ -103,20 +246,6 @@ impl Module for InstanceNorm2d {
             .broadcast_div(&(var + self.eps)?.sqrt()?)?
             .reshape((n, c, h, w))
     }
-}
-
-/// LeakyReLU with slope `negative_slope` for negative inputs: `max(x, 0) + slope min(x, 0)`.
-/// The paper uses 0.2 ([`LEAKY_SLOPE`]). Differentiable twice (its derivative is piecewise
-/// constant), as the gradient penalty needs.
-///
-/// ```
-/// use candle_core::{Device, Tensor};
-/// let y = patch_gan::leaky_relu(&Tensor::new(&[-1f32, 2.], &Device::Cpu)?, 0.2)?;
-/// assert_eq!(y.to_vec1::<f32>()?, [-0.2, 2.0]);
-/// # Ok::<(), candle_core::Error>(())
-/// ```
-pub fn leaky_relu(xs: &Tensor, negative_slope: f64) -> candle_core::Result<Tensor> {
-    candle_nn::ops::leaky_relu(xs, negative_slope)
 }
 
 /// The LeakyReLU slope of every SinGRAV network.

@@ -7,7 +7,7 @@
 //! cargo run --release -p volrender --example render_throughput -- \
 //!     --grid 64 --samples 128 --rays 65536 --scene sparse --backward --threads 2 [--skip-empty]
 //! ```
-//! Like the peer, it tunes glibc's malloc first (see `tune_malloc`; `--no-mallopt` keeps the
+//! Like the peer, it tunes glibc's malloc first (see `volrender::tune_malloc`; `--no-mallopt` keeps the
 //! defaults), so both sides allocate under the same conditions.
 //!
 //! `--grid-npy DIR/grid.npy` renders the `(4, D, H, W)` volume the peer saved with
@@ -75,25 +75,6 @@ struct Args {
     seed: u64,
 }
 
-/// Keeps freed memory in the glibc heap instead of returning it to the system, exactly as the
-/// peer's `tune_malloc` does (`M_MMAP_MAX = 0`, `M_TRIM_THRESHOLD = 2^30`): otherwise every
-/// multi-megabyte buffer a render or its autograd allocates (the interleaved volume copy, the
-/// gradient, candle's gradient sum) is mapped afresh and page-faulted in on each call. Returns
-/// whether it was applied.
-fn tune_malloc() -> bool {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        // SAFETY: mallopt only sets allocator parameters; it is called before any other thread
-        // exists.
-        unsafe {
-            libc::mallopt(libc::M_MMAP_MAX, 0) == 1
-                && libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30) == 1
-        }
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    false
-}
-
 /// Returns the median and all run times in seconds.
 fn time(
     warmup: usize,
@@ -116,7 +97,7 @@ fn time(
 
 fn main() -> Result<()> {
     let a = Args::parse();
-    let mallopt = !a.no_mallopt && tune_malloc();
+    let mallopt = !a.no_mallopt && volrender::tune_malloc();
     rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads)
         .build_global()?;

@@ -51,6 +51,7 @@
 // `unsafe` only to call the AVX2+FMA build of the kernels after detecting both (kernel/tile.rs).
 #![deny(unsafe_code)]
 
+mod allocator;
 mod buffer_pool;
 mod camera;
 mod config;
@@ -64,6 +65,7 @@ pub mod reference;
 pub mod scenes;
 mod transforms;
 
+pub use allocator::tune_malloc;
 pub use buffer_pool::release_gradient_buffers;
 pub use camera::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 pub use config::{Outputs, RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};

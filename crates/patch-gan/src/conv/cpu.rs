@@ -11,23 +11,7 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
-/// The floating-point types the kernels run on (the ones `gemm` multiplies).
-pub(crate) trait Element:
-    Copy + Send + Sync + 'static + std::ops::Add<Output = Self>
-{
-    const ZERO: Self;
-    const ONE: Self;
-}
-
-impl Element for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-}
-
-impl Element for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-}
+use crate::element::Element;
 
 /// Shape of one batched 3D convolution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -7,6 +7,7 @@ mod conv3d;
 mod cpu;
 pub(crate) mod op;
 mod slices;
+mod winograd;
 
 pub use conv2d::{conv2d, Conv2d};
 pub use conv3d::{conv3d, conv3d_no_bias, Conv3d};

@@ -1,0 +1,49 @@
+//! The floating-point types the CPU kernels run on: f32 (training) and f64 (exactness tests).
+
+use std::ops::{Add, Mul, Sub};
+
+/// A float the kernels run on (the ones `gemm` multiplies); sums that must not lose bits go
+/// through `f64`.
+pub(crate) trait Element:
+    Copy
+    + Send
+    + Sync
+    + 'static
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+{
+    const ZERO: Self;
+    const ONE: Self;
+
+    fn to_f64(self) -> f64;
+
+    fn from_f64(value: f64) -> Self;
+}
+
+impl Element for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+
+    fn from_f64(value: f64) -> Self {
+        value as f32
+    }
+}
+
+impl Element for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+
+    fn to_f64(self) -> f64 {
+        self
+    }
+
+    fn from_f64(value: f64) -> Self {
+        value
+    }
+}

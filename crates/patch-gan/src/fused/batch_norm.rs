@@ -1,0 +1,362 @@
+//! BatchNorm (batch or running statistics) followed by LeakyReLU, as one op each way.
+//!
+//! Forward: per channel, the mean and variance in f64 (two passes over the channel, which stays
+//! in cache), then `y = act(gamma (x - mean) / sqrt(var + eps) + beta)` in one pass. Backward,
+//! with `g` the incoming gradient masked by the activation's slope and `xh` the normalised input:
+//! `dbeta = sum g`, `dgamma = sum g xh` and, with batch statistics,
+//! `dx = gamma / sqrt(var + eps) (g - dbeta / M - xh dgamma / M)` over the `M` values of a channel
+//! (with running statistics the last two terms vanish). Second-order gradients through this op
+//! are not implemented (candle reports `BackwardNotSupported`): the generators, its users, are
+//! differentiated once.
+
+use std::sync::{Arc, Mutex};
+
+use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor};
+use rayon::prelude::*;
+
+use super::channels_and_plane;
+use crate::element::Element;
+use crate::storage::{self, Kernel};
+
+/// Which statistics normalise the input.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum NormStats {
+    /// The batch's own (training mode).
+    Batch,
+    /// Given per-channel mean and (biased) variance (evaluation mode).
+    Running { mean: Vec<f64>, var: Vec<f64> },
+}
+
+/// The per-channel statistics a batch-statistics forward pass measured.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct BatchStats {
+    pub mean: Vec<f64>,
+    /// Biased (divided by the count).
+    pub var: Vec<f64>,
+    /// Values per channel.
+    pub count: usize,
+}
+
+/// `LeakyReLU_slope(gamma (x - mean) / sqrt(var + eps) + beta)` per channel of `xs` `(N, C, ...)`
+/// (`slope = 1` is BatchNorm alone), with the batch statistics it used when `stats` is
+/// [`NormStats::Batch`]. `gamma` and `beta` are `(C,)`.
+pub(crate) fn batch_norm_act(
+    xs: &Tensor,
+    gamma: &Tensor,
+    beta: &Tensor,
+    stats: NormStats,
+    eps: f64,
+    slope: f64,
+) -> candle_core::Result<(Tensor, Option<BatchStats>)> {
+    let saved = Arc::new(Mutex::new(None));
+    let op = BatchNormAct {
+        stats,
+        eps,
+        slope,
+        saved: Arc::clone(&saved),
+    };
+    let ys = xs
+        .contiguous()?
+        .apply_op3(&gamma.contiguous()?, &beta.contiguous()?, op)?;
+    let measured = lock(&saved)?.as_ref().and_then(|s| s.batch.clone());
+    Ok((ys, measured))
+}
+
+/// What the forward pass leaves for the backward pass.
+#[derive(Debug, Clone)]
+struct Saved {
+    mean: Vec<f64>,
+    inv_std: Vec<f64>,
+    gamma: Vec<f64>,
+    beta: Vec<f64>,
+    batch: Option<BatchStats>,
+}
+
+fn lock(
+    saved: &Mutex<Option<Saved>>,
+) -> candle_core::Result<std::sync::MutexGuard<'_, Option<Saved>>> {
+    saved
+        .lock()
+        .map_err(|_| candle_core::Error::Msg("batch-norm: statistics lock poisoned".into()))
+}
+
+struct BatchNormAct {
+    stats: NormStats,
+    eps: f64,
+    slope: f64,
+    saved: Arc<Mutex<Option<Saved>>>,
+}
+
+/// Per-channel `(mean, biased variance)` of `x` `(N, C, plane)`, in f64.
+fn channel_stats<T: Element>(x: &[T], channels: usize, plane: usize) -> Vec<(f64, f64)> {
+    let batch = x.len() / (channels * plane);
+    let count = (batch * plane) as f64;
+    (0..channels)
+        .into_par_iter()
+        .map(|c| {
+            let planes = || (0..batch).map(move |n| &x[(n * channels + c) * plane..][..plane]);
+            let mean = planes()
+                .map(|p| p.iter().map(|v| v.to_f64()).sum::<f64>())
+                .sum::<f64>()
+                / count;
+            let var = planes()
+                .map(|p| p.iter().map(|v| (v.to_f64() - mean).powi(2)).sum::<f64>())
+                .sum::<f64>()
+                / count;
+            (mean, var)
+        })
+        .collect()
+}
+
+/// The per-channel affine map `x -> x scale + shift` that normalises and applies gamma, beta.
+fn affine<T: Element>(s: &Saved, c: usize) -> (T, T) {
+    let scale = s.gamma[c] * s.inv_std[c];
+    (
+        T::from_f64(scale),
+        T::from_f64(s.beta[c] - s.mean[c] * scale),
+    )
+}
+
+/// The forward kernel for one input shape.
+struct ForwardKernel<'a> {
+    op: &'a BatchNormAct,
+    channels: usize,
+    plane: usize,
+    gamma: Vec<f64>,
+    beta: Vec<f64>,
+}
+
+impl Kernel for ForwardKernel<'_> {
+    fn run<T: Element>(&self, x: &[T], _: &[T]) -> candle_core::Result<Vec<T>> {
+        let (channels, plane) = (self.channels, self.plane);
+        let (mean, var, batch) = match &self.op.stats {
+            NormStats::Batch => {
+                let stats = channel_stats(x, channels, plane);
+                let (mean, var): (Vec<f64>, Vec<f64>) = stats.into_iter().unzip();
+                let batch = BatchStats {
+                    mean: mean.clone(),
+                    var: var.clone(),
+                    count: x.len() / channels,
+                };
+                (mean, var, Some(batch))
+            }
+            NormStats::Running { mean, var } => (mean.clone(), var.clone(), None),
+        };
+        let saved = Saved {
+            inv_std: var.iter().map(|v| 1.0 / (v + self.op.eps).sqrt()).collect(),
+            mean,
+            gamma: self.gamma.clone(),
+            beta: self.beta.clone(),
+            batch,
+        };
+        let slope = T::from_f64(self.op.slope);
+        let mut out = vec![T::ZERO; x.len()];
+        out.par_chunks_mut(plane)
+            .zip(x.par_chunks(plane))
+            .enumerate()
+            .for_each(|(i, (dst, src))| {
+                let (scale, shift) = affine::<T>(&saved, i % channels);
+                for (d, &v) in dst.iter_mut().zip(src) {
+                    let pre = v * scale + shift;
+                    *d = if pre > T::ZERO { pre } else { pre * slope };
+                }
+            });
+        *lock(&self.op.saved)? = Some(saved);
+        Ok(out)
+    }
+}
+
+impl CustomOp3 for BatchNormAct {
+    fn name(&self) -> &'static str {
+        "batch-norm-leaky-relu"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let (channels, plane) = channels_and_plane(l1.dims());
+        let gamma = storage::to_f64_vec(self.name(), (s2, l2))?;
+        let beta = storage::to_f64_vec(self.name(), (s3, l3))?;
+        let running_ok = match &self.stats {
+            NormStats::Batch => true,
+            NormStats::Running { mean, var } => mean.len() == channels && var.len() == channels,
+        };
+        if l1.dims().len() < 2
+            || plane == 0
+            || gamma.len() != channels
+            || beta.len() != channels
+            || !running_ok
+        {
+            candle_core::bail!(
+                "{}: input {:?} needs (C,) = ({channels},) weight, bias and statistics, got {:?} and {:?}",
+                self.name(),
+                l1.shape(),
+                l2.shape(),
+                l3.shape()
+            );
+        }
+        let kernel = ForwardKernel {
+            op: self,
+            channels,
+            plane,
+            gamma,
+            beta,
+        };
+        Ok((
+            storage::run_unary(self.name(), (s1, l1), &kernel)?,
+            l1.shape().clone(),
+        ))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        gamma: &Tensor,
+        beta: &Tensor,
+        _y: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let saved = lock(&self.saved)?
+            .clone()
+            .ok_or_else(|| candle_core::Error::Msg("batch-norm: backward before forward".into()))?;
+        let channels = saved.mean.len();
+        let backward = BatchNormActGrad {
+            saved,
+            batch: self.stats == NormStats::Batch,
+            slope: self.slope,
+            plane: channels_and_plane(x.dims()).1,
+        };
+        let packed = x.contiguous()?.apply_op2(&grad.contiguous()?, backward)?;
+        let len = x.elem_count();
+        let grad_x = x
+            .track_op()
+            .then(|| packed.narrow(0, 0, len)?.reshape(x.shape()))
+            .transpose()?;
+        let grad_gamma = gamma
+            .track_op()
+            .then(|| packed.narrow(0, len, channels))
+            .transpose()?;
+        let grad_beta = beta
+            .track_op()
+            .then(|| packed.narrow(0, len + channels, channels))
+            .transpose()?;
+        Ok((grad_x, grad_gamma, grad_beta))
+    }
+}
+
+/// `(x, grad_y) -> [grad_x, grad_gamma, grad_beta]` packed in one vector.
+struct BatchNormActGrad {
+    saved: Saved,
+    batch: bool,
+    slope: f64,
+    /// Values per `(n, c)` plane.
+    plane: usize,
+}
+
+impl BatchNormActGrad {
+    /// Per channel: `(sum g, sum g xh)` with `g` the gradient through the activation.
+    fn sums<T: Element>(
+        &self,
+        x: &[T],
+        grad: &[T],
+        channels: usize,
+        plane: usize,
+    ) -> Vec<(f64, f64)> {
+        let batch = x.len() / (channels * plane);
+        let slope = T::from_f64(self.slope);
+        (0..channels)
+            .into_par_iter()
+            .map(|c| {
+                let (scale, shift) = affine::<T>(&self.saved, c);
+                let (mean, inv) = (self.saved.mean[c], self.saved.inv_std[c]);
+                let (mut sum_g, mut sum_gx) = (0.0, 0.0);
+                for n in 0..batch {
+                    let at = (n * channels + c) * plane;
+                    for (&v, &g) in x[at..at + plane].iter().zip(&grad[at..at + plane]) {
+                        let g = if v * scale + shift > T::ZERO {
+                            g
+                        } else {
+                            g * slope
+                        }
+                        .to_f64();
+                        sum_g += g;
+                        sum_gx += g * (v.to_f64() - mean) * inv;
+                    }
+                }
+                (sum_g, sum_gx)
+            })
+            .collect()
+    }
+}
+
+impl Kernel for BatchNormActGrad {
+    fn run<T: Element>(&self, x: &[T], grad: &[T]) -> candle_core::Result<Vec<T>> {
+        let (channels, plane) = (self.saved.mean.len(), self.plane);
+        let sums = self.sums(x, grad, channels, plane);
+        let count = (x.len() / channels) as f64;
+        let slope = T::from_f64(self.slope);
+        let mut out = vec![T::ZERO; x.len() + 2 * channels];
+        let (dx, params) = out.split_at_mut(x.len());
+        dx.par_chunks_mut(plane)
+            .zip(x.par_chunks(plane).zip(grad.par_chunks(plane)))
+            .enumerate()
+            .for_each(|(i, (dst, (xs, gs)))| {
+                let c = i % channels;
+                let (scale, shift) = affine::<T>(&self.saved, c);
+                let (mean, inv) = (self.saved.mean[c], self.saved.inv_std[c]);
+                let k = self.saved.gamma[c] * inv;
+                // dx = k g - k sum_g / M - k xh sum_gx / M, with xh = (x - mean) inv.
+                let (sum_g, sum_gx) = if self.batch { sums[c] } else { (0.0, 0.0) };
+                let along_x = T::from_f64(-k * sum_gx / count * inv);
+                let offset = T::from_f64(-k * sum_g / count);
+                let (k, mean) = (T::from_f64(k), T::from_f64(mean));
+                for ((d, &v), &g) in dst.iter_mut().zip(xs).zip(gs) {
+                    let g = if v * scale + shift > T::ZERO {
+                        g
+                    } else {
+                        g * slope
+                    };
+                    *d = k * g + along_x * (v - mean) + offset;
+                }
+            });
+        for (c, &(sum_g, sum_gx)) in sums.iter().enumerate() {
+            params[c] = T::from_f64(sum_gx);
+            params[channels + c] = T::from_f64(sum_g);
+        }
+        Ok(out)
+    }
+}
+
+impl CustomOp2 for BatchNormActGrad {
+    fn name(&self) -> &'static str {
+        "batch-norm-leaky-relu-grad"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        if l1.shape() != l2.shape() {
+            candle_core::bail!(
+                "{}: input {:?} and gradient {:?} differ",
+                self.name(),
+                l1.shape(),
+                l2.shape()
+            );
+        }
+        let len = l1.shape().elem_count() + 2 * self.saved.mean.len();
+        Ok((
+            storage::run_binary(self.name(), (s1, l1), (s2, l2), self)?,
+            Shape::from(len),
+        ))
+    }
+}
