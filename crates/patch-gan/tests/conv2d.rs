@@ -7,19 +7,9 @@
 use candle_core::{DType, Device, Module, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{conv2d, functional, Conv2d, ConvConfig};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+mod common;
 
-fn random(shape: &[usize], seed: u64) -> Tensor {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n = shape.iter().product();
-    let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
-}
-
-fn values(t: &Tensor) -> Vec<f64> {
-    t.flatten_all().unwrap().to_vec1().unwrap()
-}
+use common::{check_finite_differences, random, values};
 
 fn max_diff(a: &Tensor, b: &Tensor) -> f64 {
     assert_eq!(a.dims(), b.dims());
@@ -39,29 +29,9 @@ const CASES: [([usize; 4], [usize; 4], usize, usize); 5] = [
     ([1, 1, 8, 8], [1, 1, 3, 3], 0, 3),
 ];
 
-/// Central finite differences of `f` along every entry of `var`, checked against `analytic`.
-fn check_finite_differences(var: &Var, analytic: &Tensor, f: impl Fn() -> f64, what: &str) {
-    let base = values(var.as_tensor());
-    for (j, &g) in values(analytic).iter().enumerate() {
-        let eval = |delta: f64| {
-            let mut v = base.clone();
-            v[j] += delta;
-            var.set(&Tensor::from_vec(v, var.shape(), &Device::Cpu).unwrap())
-                .unwrap();
-            f()
-        };
-        // Every function checked is a polynomial of degree at most 4 in the entries: step 1e-4
-        // leaves a truncation error of order 1e-8 next to the rounding error.
-        let step = 1e-4;
-        let fd = (eval(step) - eval(-step)) / (2.0 * step);
-        eval(0.0);
-        assert!(
-            (fd - g).abs() < 1e-6 * (1.0 + g.abs()),
-            "{what}, entry {j} of {:?}: finite difference {fd} vs {g}",
-            var.shape()
-        );
-    }
-}
+/// Every function checked is a polynomial of degree at most 4 in the entries: step 1e-4 leaves a
+/// truncation error of order 1e-8 next to the rounding error.
+const STEP: f64 = 1e-4;
 
 #[test]
 fn values_match_candle_and_gradients_finite_differences() {
@@ -83,7 +53,13 @@ fn values_match_candle_and_gradients_finite_differences() {
         let grads = loss().backward().unwrap();
         for var in [&x, &k] {
             let value = || loss().to_scalar::<f64>().unwrap();
-            check_finite_differences(var, grads.get(var).unwrap(), value, &format!("case {i}"));
+            check_finite_differences(
+                var,
+                grads.get(var).unwrap(),
+                value,
+                STEP,
+                &format!("case {i}"),
+            );
         }
     }
 }
@@ -114,7 +90,13 @@ fn second_order_gradients_match_finite_differences() {
         let grads = second_order(&x, &k, cfg, seed).backward().unwrap();
         for var in [&x, &k] {
             let value = || second_order(&x, &k, cfg, seed).to_scalar::<f64>().unwrap();
-            check_finite_differences(var, grads.get(var).unwrap(), value, &format!("case {i}"));
+            check_finite_differences(
+                var,
+                grads.get(var).unwrap(),
+                value,
+                STEP,
+                &format!("case {i}"),
+            );
         }
     }
 }

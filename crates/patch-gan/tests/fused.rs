@@ -7,43 +7,12 @@
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{batch_norm3d, bias_leaky_relu, leaky_relu, NORM_EPS};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+mod common;
 
-fn random(shape: &[usize], seed: u64) -> Tensor {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n = shape.iter().product();
-    let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
-}
+use common::{check_finite_differences, random, values};
 
-fn values(t: &Tensor) -> Vec<f64> {
-    t.flatten_all().unwrap().to_vec1().unwrap()
-}
-
-/// Central finite differences of `f` along every entry of `var`, checked against `analytic`.
-fn check_finite_differences(var: &Var, analytic: &Tensor, f: impl Fn() -> f64, what: &str) {
-    let base = values(var.as_tensor());
-    let analytic = values(analytic);
-    assert_eq!(analytic.len(), base.len(), "{what}");
-    for (j, &g) in analytic.iter().enumerate() {
-        let eval = |delta: f64| {
-            let mut v = base.clone();
-            v[j] += delta;
-            var.set(&Tensor::from_vec(v, var.shape(), &Device::Cpu).unwrap())
-                .unwrap();
-            f()
-        };
-        let step = 1e-6;
-        let fd = (eval(step) - eval(-step)) / (2.0 * step);
-        eval(0.0);
-        assert!(
-            (fd - g).abs() < 1e-6 * (1.0 + g.abs()),
-            "{what}, entry {j} of {:?}: finite difference {fd} vs {g}",
-            var.shape()
-        );
-    }
-}
+/// Step of the finite differences (the fused ops are smooth away from the kinks at 0).
+const STEP: f64 = 1e-6;
 
 /// `sum(r * y)` for a fixed random `r`: a loss whose gradient with respect to `y` is `r`.
 fn weighted_sum(y: &Tensor, seed: u64) -> Tensor {
@@ -64,7 +33,7 @@ fn leaky_relu_values_and_gradients_of_both_orders() {
     let loss = || weighted_sum(&leaky_relu(x.as_tensor(), 0.2).unwrap(), 2);
     let grads = loss().backward().unwrap();
     let grad = grads.get(&x).unwrap();
-    check_finite_differences(&x, grad, || loss().to_scalar().unwrap(), "leaky_relu");
+    check_finite_differences(&x, grad, || loss().to_scalar().unwrap(), STEP, "leaky_relu");
     // The gradient is itself differentiable (the penalty needs it): sum(grad^2 * x) has
     // derivative grad^2 along x, the slope's own derivative being zero.
     let grad_sq = (grad.sqr().unwrap() * x.as_tensor())
@@ -94,8 +63,8 @@ fn bias_leaky_relu_is_leaky_relu_of_the_sum_and_differentiates_like_it() {
     };
     let grads = loss().backward().unwrap();
     let value = || loss().to_scalar::<f64>().unwrap();
-    check_finite_differences(&x, grads.get(&x).unwrap(), value, "input");
-    check_finite_differences(&b, grads.get(&b).unwrap(), value, "bias");
+    check_finite_differences(&x, grads.get(&x).unwrap(), value, STEP, "input");
+    check_finite_differences(&b, grads.get(&b).unwrap(), value, STEP, "bias");
     // A bias that is not a (C,) vector of the input's channels is refused.
     assert!(bias_leaky_relu(x.as_tensor(), &random(&[4], 6), 0.2).is_err());
 }
@@ -155,10 +124,16 @@ fn batch_norm_with_leaky_relu_matches_the_definition_and_finite_differences() {
             let grads = loss().backward().unwrap();
             let value = || loss().to_scalar::<f64>().unwrap();
             let what = format!("slope {slope}, train {train}");
-            check_finite_differences(&x, grads.get(&x).unwrap(), value, &format!("{what}: input"));
+            check_finite_differences(
+                &x,
+                grads.get(&x).unwrap(),
+                value,
+                STEP,
+                &format!("{what}: input"),
+            );
             for (var, name) in [(gamma, "weight"), (beta, "bias")] {
                 let grad = grads.get(var).unwrap();
-                check_finite_differences(var, grad, value, &format!("{what}: {name}"));
+                check_finite_differences(var, grad, value, STEP, &format!("{what}: {name}"));
             }
         }
     }

@@ -77,16 +77,17 @@ impl Geometry {
     }
 }
 
-/// A pointer the forward pass shares between rayon tasks that write disjoint output columns.
+/// A pointer the forward passes share between rayon tasks that write disjoint outputs.
 #[derive(Clone, Copy)]
-struct SharedMut<T>(*mut T);
-// SAFETY: every task writes a disjoint set of elements (its own output rows), see `forward`.
+pub(crate) struct SharedMut<T>(pub(crate) *mut T);
+// SAFETY: every task writes a disjoint set of elements (its own output rows or tiles), see
+// `forward` here and in `winograd`.
 unsafe impl<T: Send> Send for SharedMut<T> {}
 unsafe impl<T: Send> Sync for SharedMut<T> {}
 
 impl<T> SharedMut<T> {
     /// A method, not a field access, so closures capture the whole (Sync) wrapper.
-    fn ptr(self) -> *mut T {
+    pub(crate) fn ptr(self) -> *mut T {
         self.0
     }
 }
@@ -249,6 +250,21 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
     total
 }
 
+/// The kernel of the transposed convolution: `w` `(C_out, C_in, kd, kh, kw)` flipped on its
+/// three spatial axes, with its two channel axes swapped.
+pub(crate) fn flipped_transposed<T: Element>(w: &[T], g: &Geometry) -> Vec<T> {
+    let taps = g.taps();
+    let mut flipped = vec![T::ZERO; w.len()];
+    for o in 0..g.c_out {
+        for c in 0..g.c_in {
+            for t in 0..taps {
+                flipped[(c * g.c_out + o) * taps + t] = w[(o * g.c_in + c) * taps + taps - 1 - t];
+            }
+        }
+    }
+    flipped
+}
+
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `x`: shape `(N, C_in, D, H, W)`.
 ///
 /// This is a transposed convolution, computed as a forward one: the output gradient is scattered
@@ -281,15 +297,7 @@ pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> V
                 }
             }
         });
-    let taps = g.taps();
-    let mut flipped = vec![T::ZERO; w.len()];
-    for o in 0..g.c_out {
-        for c in 0..g.c_in {
-            for t in 0..taps {
-                flipped[(c * g.c_out + o) * taps + t] = w[(o * g.c_in + c) * taps + taps - 1 - t];
-            }
-        }
-    }
+    let flipped = flipped_transposed(w, g);
     let transposed = Geometry {
         batch: g.batch,
         c_in: g.c_out,

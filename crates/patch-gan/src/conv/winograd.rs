@@ -22,7 +22,7 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
-use super::cpu::Geometry;
+use super::cpu::{Geometry, SharedMut};
 use crate::element::Element;
 
 /// Largest transformed tile: 4 x 4 x 4.
@@ -500,20 +500,6 @@ fn expand_output_grad_row<T: Element>(
     }
 }
 
-/// A pointer the chunks share to write disjoint parts of one output.
-#[derive(Clone, Copy)]
-struct SharedMut<T>(*mut T);
-// SAFETY: every chunk writes only the outputs of its own tiles (see `forward`).
-unsafe impl<T: Send> Send for SharedMut<T> {}
-unsafe impl<T: Send> Sync for SharedMut<T> {}
-
-impl<T> SharedMut<T> {
-    /// A method, so closures capture the whole (Sync) wrapper.
-    fn ptr(self) -> *mut T {
-        self.0
-    }
-}
-
 /// `dst (m x n) = lhs (m x k) * rhs (k x n)` (or `+=` with `accumulate`), with the row and
 /// column strides given as `(row, col)`.
 ///
@@ -694,15 +680,7 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `x`, as
 /// [`super::cpu::grad_input`]: the forward pass of the transposed convolution.
 pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> Vec<T> {
-    let taps: usize = g.kernel.iter().product();
-    let mut flipped = vec![T::ZERO; w.len()];
-    for o in 0..g.c_out {
-        for c in 0..g.c_in {
-            for t in 0..taps {
-                flipped[(c * g.c_out + o) * taps + t] = w[(o * g.c_in + c) * taps + taps - 1 - t];
-            }
-        }
-    }
+    let flipped = super::cpu::flipped_transposed(w, g);
     let transposed = Geometry {
         batch: g.batch,
         c_in: g.c_out,

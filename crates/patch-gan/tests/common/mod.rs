@@ -1,0 +1,51 @@
+//! Helpers the test files share: seeded random tensors and finite-difference checks.
+
+// Each test binary compiles this module and uses a different part of it.
+#![allow(dead_code)]
+
+use candle_core::{Device, Tensor, Var};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// An f64 tensor of `shape` with values uniform in [-1, 1) from `seed`.
+pub fn random(shape: &[usize], seed: u64) -> Tensor {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = shape.iter().product();
+    let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+}
+
+/// The values of an f64 tensor, flattened.
+pub fn values(t: &Tensor) -> Vec<f64> {
+    t.flatten_all().unwrap().to_vec1().unwrap()
+}
+
+/// Central finite differences of `f` with `step` along every entry of `var`, checked against
+/// `analytic` to 1e-6 relative (plus 1e-6 absolute).
+pub fn check_finite_differences(
+    var: &Var,
+    analytic: &Tensor,
+    f: impl Fn() -> f64,
+    step: f64,
+    what: &str,
+) {
+    let base = values(var.as_tensor());
+    let analytic = values(analytic);
+    assert_eq!(analytic.len(), base.len(), "{what}");
+    for (j, &g) in analytic.iter().enumerate() {
+        let eval = |delta: f64| {
+            let mut v = base.clone();
+            v[j] += delta;
+            var.set(&Tensor::from_vec(v, var.shape(), &Device::Cpu).unwrap())
+                .unwrap();
+            f()
+        };
+        let fd = (eval(step) - eval(-step)) / (2.0 * step);
+        eval(0.0);
+        assert!(
+            (fd - g).abs() < 1e-6 * (1.0 + g.abs()),
+            "{what}, entry {j} of {:?}: finite difference {fd} vs {g}",
+            var.shape()
+        );
+    }
+}
