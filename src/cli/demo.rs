@@ -47,9 +47,11 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 6] = [
+const LOSS_COLUMNS: [(&str, &str); 8] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
+    ("opacity", "opacity"),
+    ("colour_distribution", "colour distribution"),
     ("critic", "critic"),
     ("penalty", "gradient penalty"),
     ("adversarial", "adversarial"),

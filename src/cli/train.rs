@@ -60,6 +60,26 @@ pub struct TrainOptions {
     /// Ablation: train without depth supervision.
     #[arg(long)]
     pub no_depth: bool,
+    /// Ablation: train without opacity supervision (the opacity reconstruction term and the
+    /// critics' opacity channel), as the paper.
+    #[arg(long)]
+    pub no_opacity: bool,
+    /// Weight of the colour-distribution loss of generated scenes at the 3D scales (sliced W2
+    /// between the pixel colours of a sample's rendering and the real view's; default: the
+    /// preset's).
+    #[arg(long, value_name = "W")]
+    pub lambda_colour: Option<f64>,
+    /// Views of the reconstruction loss per generator step at the 3D scales (default: the
+    /// preset's).
+    #[arg(long, value_name = "N")]
+    pub reconstruction_views: Option<usize>,
+    /// Conv layers L of every generator and critic (default: the preset's); the receptive
+    /// field is 2L + 1 voxels or pixels.
+    #[arg(long, value_name = "L")]
+    pub layers: Option<usize>,
+    /// Adam learning rate of generators and critics (default: the preset's).
+    #[arg(long, value_name = "LR")]
+    pub learning_rate: Option<f64>,
     /// Iterations at every scale, the first quarter reconstruction-only (default: the preset's
     /// schedule).
     #[arg(long, value_name = "N")]
@@ -106,6 +126,22 @@ impl TrainOptions {
         }
         config.use_csg &= !self.no_csg;
         config.use_depth &= !self.no_depth;
+        if let Some(views) = self.reconstruction_views {
+            config = config.with_reconstruction_views(views);
+        }
+        if let Some(weight) = self.lambda_colour {
+            config.lambda_colour = weight;
+        }
+        if let Some(layers) = self.layers {
+            config.layers = layers;
+        }
+        if let Some(rate) = self.learning_rate {
+            config.learning_rate = rate;
+        }
+        if self.no_opacity {
+            config.lambda_opacity = 0.0;
+            config.critic_opacity = false;
+        }
         config.seed = self.seed;
         if self.fitted.is_some() || self.fit {
             config.lambda_fitted = self.lambda_fitted;
@@ -342,6 +378,8 @@ fn format_losses(l: &StepLosses) -> String {
         ("adv", l.adversarial),
         ("swd", l.swd),
         ("fit", l.fitted),
+        ("opacity", l.opacity),
+        ("colour", l.colour_distribution),
     ];
     for (name, value) in optional {
         if let Some(v) = value {

@@ -21,9 +21,13 @@ use crate::error::{invalid, Error, Result};
 /// assert_eq!(paper.scales(), 6);
 /// assert_eq!(paper.volume_sizes, [40, 53, 71, 95, 126]);
 /// assert_eq!(paper.final_image_size(), 320);
+/// assert_eq!(paper.layers, 7);
 /// # Ok::<(), singrav::Error>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// A field this version does not know comes from a newer volgen and may change the model
+// (a layer, a normalisation): building the model without it would sample something else.
+#[serde(deny_unknown_fields)]
 pub struct TrainConfig {
     /// The preset this configuration started from (for the record).
     pub preset: String,
@@ -48,6 +52,12 @@ pub struct TrainConfig {
     /// Views rendered per step, for the critic's real and fake batches and the reconstruction
     /// loss: rendering one volume from several views costs little next to generating it.
     pub views_per_step: usize,
+    /// Views per step of each scale (coarsest first, the upsampler last) when they are not all
+    /// `views_per_step`, as in the paper's table of training parameters (6 generated and 2
+    /// reconstruction views at the coarse scales down to 2 and 1 at the finest). Absent
+    /// (`None`) in runs made before it existed, which used `views_per_step` everywhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_views: Option<Vec<ScaleViews>>,
     /// Adam learning rate (5e-4) for generators and critics.
     pub learning_rate: f64,
     /// Adam betas (0.9, 0.999).
@@ -66,6 +76,22 @@ pub struct TrainConfig {
     /// used) is the paper's image-only training.
     #[serde(default)]
     pub lambda_fitted: f64,
+    /// Weight of the opacity reconstruction at every 3D scale: `lambda_opacity * mse(opacity,
+    /// alpha)` between renderings of V*_n and the dataset's alpha. Colour alone cannot tell a
+    /// grey stone from a half-transparent purple one in front of green grass, and the pyramid
+    /// learnt the latter; alpha can. 0 (runs made before it existed) leaves it out.
+    #[serde(default)]
+    pub lambda_opacity: f64,
+    /// The 3D scales' critics also see opacity as their last channel (rendered opacity against
+    /// the dataset's alpha), so matter in the sky and see-through objects look fake to them.
+    /// Off in runs made before it existed.
+    #[serde(default)]
+    pub critic_opacity: bool,
+    /// Weight of the colour-distribution loss of generated scenes at the 3D scales: the squared
+    /// sliced W2 distance between the pixel colours of a sample's rendering and of the real
+    /// view from the same camera. 0 (runs made before it existed) leaves it out.
+    #[serde(default)]
+    pub lambda_colour: f64,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -119,6 +145,26 @@ pub enum SwdFeatures {
     Vgg19,
 }
 
+/// How many views one training step of a scale renders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ScaleViews {
+    /// Views of the critic's real and fake batches and of the generator's adversarial
+    /// renderings.
+    pub generated: usize,
+    /// Views of the reconstruction loss per generator step.
+    pub reconstruction: usize,
+}
+
+impl ScaleViews {
+    /// `views` views for both.
+    pub fn same(views: usize) -> Self {
+        Self {
+            generated: views,
+            reconstruction: views,
+        }
+    }
+}
+
 /// How long one scale trains. One iteration is `d_steps` critic steps, then `g_steps`
 /// generator steps; the first `reconstruction_only` iterations skip the critic and train the
 /// reconstruction alone (a quarter in the presets, as the paper's 20 of 80 epochs).
@@ -151,6 +197,33 @@ fn uniform_schedule(iterations: usize, scales: usize) -> Vec<ScaleSchedule> {
 /// three seeds, sample metrics unchanged; docs/training.md has the table and the times).
 const TINY_ITERATIONS: [usize; 4] = [240, 160, 120, 80];
 
+/// The paper's table of training parameters (`tab:train_params`), first row (Stonehenge and
+/// most scenes): views per step of generated scenes and of the reconstruction at its 6 scales.
+const PAPER_VIEWS: [(usize, usize); 6] = [(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)];
+/// The same table's Island row, which also has L = 5 and 25^2 coarsest renderings.
+const ISLAND_VIEWS: [(usize, usize); 6] = [(6, 2), (6, 2), (6, 2), (6, 1), (3, 1), (2, 1)];
+
+/// Per-scale views from `(generated, reconstruction)` pairs.
+fn table_views(table: &[(usize, usize)]) -> Vec<ScaleViews> {
+    table
+        .iter()
+        .map(|&(generated, reconstruction)| ScaleViews {
+            generated,
+            reconstruction,
+        })
+        .collect()
+}
+
+/// Views of the reconstruction loss per generator step at `tiny`'s 3D scales (its critics see
+/// 2): cheap next to the generator pass, and V*'s gradient less noisy.
+const TINY_RECONSTRUCTION_VIEWS: usize = 8;
+
+/// Weight of the colour-distribution loss in every preset (see [`TrainConfig::lambda_colour`]).
+const LAMBDA_COLOUR: f64 = 20.0;
+
+/// Weight of the opacity reconstruction in every preset (see [`TrainConfig::lambda_opacity`]).
+const LAMBDA_OPACITY: f64 = 10.0;
+
 /// The volume grows by 4/3 per scale.
 const VOLUME_GROWTH: f64 = 4.0 / 3.0;
 /// Renderings grow by 1.5 per scale.
@@ -178,12 +251,16 @@ fn sample_ramp(first: usize, last: usize, count: usize) -> Vec<usize> {
 
 impl TrainConfig {
     /// The names [`TrainConfig::preset`] accepts.
-    pub const PRESETS: [&'static str; 4] = ["paper", "small", "tiny", "micro"];
+    pub const PRESETS: [&'static str; 5] = ["paper", "paper-island", "small", "tiny", "micro"];
 
     /// A named preset:
     ///
-    /// - `paper`: the paper's N = 6 (volumes 40..126, renderings 32..160, final 320^2), L = 5,
-    ///   32 channels, 64 to 128 samples. Needs a GPU (see docs/training.md).
+    /// - `paper`: the paper's N = 6 (volumes 40..126, renderings 32..160, final 320^2), and its
+    ///   table of training parameters for Stonehenge and most scenes: L = 7, 6, 6, 6, 5, 2, 2
+    ///   generated and 2, 2, 2, 1, 1, 1 reconstruction views per step; 32 channels, 64 to 128
+    ///   samples. Needs a GPU (see docs/training.md).
+    /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
+    ///   generated views.
     /// - `small`: N = 5, volumes 24..57, renderings 32..108, 16 channels; an hour-scale CPU run.
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps); about ten minutes on
@@ -195,13 +272,14 @@ impl TrainConfig {
             volume_sizes: vec![40, 53, 71, 95, 126],
             image_sizes: vec![32, 48, 72, 108, 160],
             samples: sample_ramp(64, 128, 5),
-            layers: 5,
+            layers: 7,
             channels: 32,
             upsampler_widths: [32, 16, 8, 8],
             schedule: uniform_schedule(2000, 6),
             d_steps: 3,
             g_steps: 3,
             views_per_step: 1,
+            scale_views: Some(table_views(&PAPER_VIEWS)),
             learning_rate: 5e-4,
             betas: (0.9, 0.999),
             gp_weight: 0.1,
@@ -209,6 +287,9 @@ impl TrainConfig {
             lambda_depth: 30.0,
             lambda_swd: 1.0,
             lambda_fitted: 0.0,
+            lambda_opacity: LAMBDA_OPACITY,
+            critic_opacity: true,
+            lambda_colour: LAMBDA_COLOUR,
             noise_amp_factor: 0.1,
             noise_amp_first: 1.0,
             density_scale: 25.0,
@@ -226,7 +307,9 @@ impl TrainConfig {
         };
         let scaled = |preset: &str, scales: usize, volume: usize, image: usize| Self {
             preset: preset.into(),
+            layers: 5,
             views_per_step: 4,
+            scale_views: None,
             volume_sizes: geometric(volume, VOLUME_GROWTH, scales - 1),
             image_sizes: geometric(image, IMAGE_GROWTH, scales - 1),
             samples: sample_ramp(48, 96, scales - 1),
@@ -235,6 +318,13 @@ impl TrainConfig {
             ..paper.clone()
         };
         match name {
+            "paper-island" => Ok(Self {
+                preset: "paper-island".into(),
+                layers: 5,
+                image_sizes: geometric(25, (160.0f64 / 25.0).powf(0.25), 5),
+                scale_views: Some(table_views(&ISLAND_VIEWS)),
+                ..paper
+            }),
             "paper" => Ok(paper),
             "small" => Ok(Self {
                 schedule: uniform_schedule(600, 5),
@@ -249,7 +339,8 @@ impl TrainConfig {
                 learning_rate: 1e-3,
                 checkpoint_seconds: 60,
                 ..scaled("tiny", 4, 16, 24)
-            }),
+            }
+            .with_reconstruction_views(TINY_RECONSTRUCTION_VIEWS)),
             "micro" => Ok(Self {
                 layers: 3,
                 channels: 4,
@@ -269,6 +360,29 @@ impl TrainConfig {
                 ),
             )),
         }
+    }
+
+    /// The views per step of scale `n` (1-based).
+    ///
+    /// # Panics
+    /// If `n` is not a scale of this configuration (see [`TrainConfig::validate`]).
+    pub fn views(&self, n: usize) -> ScaleViews {
+        match &self.scale_views {
+            Some(views) => views[n - 1],
+            None => ScaleViews::same(self.views_per_step),
+        }
+    }
+
+    /// Sets the reconstruction loss's views per generator step at every 3D scale to `views`,
+    /// keeping each scale's generated views (and the upsampler's views).
+    pub fn with_reconstruction_views(mut self, views: usize) -> Self {
+        let mut all: Vec<ScaleViews> = (1..=self.scales()).map(|n| self.views(n)).collect();
+        let upsampler = all.len() - 1;
+        for scale in &mut all[..upsampler] {
+            scale.reconstruction = views;
+        }
+        self.scale_views = Some(all);
+        self
     }
 
     /// The number of scales N (3D scales plus the upsampler).
@@ -325,6 +439,12 @@ impl TrainConfig {
         if let Some(&upsampler) = self.schedule.last() {
             self.schedule.truncate(scales - 1);
             self.schedule.push(upsampler);
+        }
+        if let Some(views) = &mut self.scale_views {
+            if let Some(&upsampler) = views.last() {
+                views.truncate(scales - 1);
+                views.push(upsampler);
+            }
         }
         Ok(self)
     }
@@ -390,6 +510,25 @@ impl TrainConfig {
         if self.d_steps == 0 || self.g_steps == 0 {
             return Err(invalid("d_steps / g_steps", "must be positive"));
         }
+        if self.views_per_step == 0 {
+            return Err(invalid("views_per_step", "must be positive"));
+        }
+        if let Some(views) = &self.scale_views {
+            if views.len() != n + 1
+                || views
+                    .iter()
+                    .any(|v| v.generated == 0 || v.reconstruction == 0)
+            {
+                return Err(invalid(
+                    "scale_views",
+                    format!(
+                        "needs one entry per scale ({}) with positive generated and \
+                         reconstruction views, has {views:?}",
+                        n + 1
+                    ),
+                ));
+            }
+        }
         for (i, s) in self.schedule.iter().enumerate() {
             if s.iterations == 0 || s.reconstruction_only > s.iterations {
                 return Err(invalid(
@@ -416,6 +555,8 @@ impl TrainConfig {
             self.lambda_color,
             self.lambda_depth,
             self.lambda_swd,
+            self.lambda_opacity,
+            self.lambda_colour,
             self.noise_amp_factor,
             self.noise_amp_first,
         ];
@@ -450,5 +591,116 @@ impl FromStr for TrainConfig {
 
     fn from_str(name: &str) -> Result<Self> {
         Self::preset(name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ScaleViews, TrainConfig};
+
+    #[test]
+    fn runs_saved_before_opacity_supervision_read_as_trained_without_it() {
+        let mut json = serde_json::to_value(TrainConfig::preset("tiny").unwrap()).unwrap();
+        let fields = json.as_object_mut().unwrap();
+        for field in [
+            "lambda_opacity",
+            "critic_opacity",
+            "lambda_colour",
+            "scale_views",
+        ] {
+            fields.remove(field);
+        }
+        let old: TrainConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(old.lambda_opacity, 0.0);
+        assert!(!old.critic_opacity);
+        assert_eq!(old.lambda_colour, 0.0);
+        assert_eq!(old.scale_views, None);
+        assert_eq!(old.views(1), ScaleViews::same(old.views_per_step));
+        old.validate().unwrap();
+    }
+
+    #[test]
+    fn a_field_from_a_newer_version_is_refused_by_name() {
+        let mut json = serde_json::to_value(TrainConfig::preset("micro").unwrap()).unwrap();
+        json.as_object_mut()
+            .unwrap()
+            .insert("upsampler_norm".into(), false.into());
+        let err = serde_json::from_value::<TrainConfig>(json).unwrap_err();
+        assert!(err.to_string().contains("upsampler_norm"), "{err}");
+    }
+
+    #[test]
+    fn reconstruction_views_change_the_3d_scales_only_and_follow_the_scales_ablation() {
+        let micro = TrainConfig::preset("micro").unwrap();
+        let config = micro.clone().with_reconstruction_views(7);
+        let upsampler = config.scales();
+        assert_eq!(
+            config.views(1),
+            ScaleViews {
+                generated: micro.views_per_step,
+                reconstruction: 7
+            }
+        );
+        assert_eq!(
+            config.views(upsampler),
+            ScaleViews::same(micro.views_per_step)
+        );
+        let fewer = config.with_scales(2).unwrap();
+        fewer.validate().unwrap();
+        assert_eq!(fewer.views(1).reconstruction, 7);
+        assert_eq!(fewer.views(2), ScaleViews::same(micro.views_per_step));
+    }
+
+    #[test]
+    fn paper_presets_follow_the_papers_table_of_training_parameters() {
+        let paper = TrainConfig::preset("paper").unwrap();
+        let island = TrainConfig::preset("paper-island").unwrap();
+        let views = |config: &TrainConfig| -> Vec<(usize, usize)> {
+            (1..=config.scales())
+                .map(|n| (config.views(n).generated, config.views(n).reconstruction))
+                .collect()
+        };
+        // L, first volume / rendering, last volume / rendering, final, views per step.
+        assert_eq!(paper.layers, 7);
+        assert_eq!((paper.volume_sizes[0], paper.image_sizes[0]), (40, 32));
+        assert_eq!((paper.volume_sizes[4], paper.image_sizes[4]), (126, 160));
+        assert_eq!(paper.final_image_size(), 320);
+        assert_eq!(
+            views(&paper),
+            [(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)]
+        );
+        assert_eq!(island.layers, 5);
+        assert_eq!((island.volume_sizes[0], island.image_sizes[0]), (40, 25));
+        assert_eq!((island.volume_sizes[4], island.image_sizes[4]), (126, 160));
+        assert_eq!(island.final_image_size(), 320);
+        assert_eq!(
+            views(&island),
+            [(6, 2), (6, 2), (6, 2), (6, 1), (3, 1), (2, 1)]
+        );
+        // The smaller presets keep their own layers and views.
+        let tiny = TrainConfig::preset("tiny").unwrap();
+        assert_eq!(tiny.layers, 5);
+        assert_eq!(
+            tiny.views(1),
+            ScaleViews {
+                generated: 2,
+                reconstruction: 8
+            }
+        );
+        assert_eq!(tiny.views(tiny.scales()), ScaleViews::same(2));
+    }
+
+    #[test]
+    fn views_missing_a_scale_or_zero_are_refused() {
+        let micro = TrainConfig::preset("micro").unwrap();
+        let short = TrainConfig {
+            scale_views: Some(vec![ScaleViews::same(2)]),
+            ..micro.clone()
+        };
+        let zero = micro.with_reconstruction_views(0);
+        for config in [short, zero] {
+            let message = config.validate().unwrap_err().to_string();
+            assert!(message.contains("scale_views"), "{message}");
+        }
     }
 }

@@ -49,6 +49,6 @@ pub mod sample;
 pub mod scenes;
 pub mod train;
 
-pub use config::{ScaleSchedule, SwdFeatures, TrainConfig};
+pub use config::{ScaleSchedule, ScaleViews, SwdFeatures, TrainConfig};
 pub use error::{Error, Result};
 pub use model::SinGrav;

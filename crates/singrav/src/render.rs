@@ -32,10 +32,23 @@ impl ViewRenderer {
         }
     }
 
+    /// Also renders opacity (when `with_opacity`): [`ViewRenderer::render_joined`] then appends
+    /// it as the critics' last channel and [`ViewRenderer::render_all`] returns it.
+    pub fn with_opacity(mut self, with_opacity: bool) -> Self {
+        self.config = self.config.with_opacity(with_opacity);
+        self
+    }
+
     /// Renders `raw` from every camera (all of one size) in one pass of the render op.
     pub fn render(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<(Tensor, Option<Tensor>)> {
         let maps = self.render_with(raw, cameras, self.config)?;
         Ok((maps.rgb, maps.depth))
+    }
+
+    /// Renders `raw` from every camera with every output this renderer was configured for:
+    /// colour, and depth and opacity when asked for.
+    pub fn render_all(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<OptionalMaps> {
+        self.render_with(raw, cameras, self.config)
     }
 
     /// Renders `raw` from every camera with colour `(V, 3, h, w)`, depth `(V, 1, h, w)` (divided
@@ -106,14 +119,15 @@ impl ViewRenderer {
         })
     }
 
-    /// Renders and joins colour and depth into the critics' `(V, 4, h, w)` input (colour only,
-    /// `(V, 3, h, w)`, without depth).
+    /// Renders and joins colour, depth and opacity into the critics' `(V, C, h, w)` input:
+    /// colour, then depth and opacity where the renderer makes them (`C` is 3 to 5).
     pub fn render_joined(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<Tensor> {
-        let (rgb, depth) = self.render(raw, cameras)?;
-        Ok(match depth {
-            Some(d) => Tensor::cat(&[&rgb, &d], 1)?,
-            None => rgb,
-        })
+        let maps = self.render_all(raw, cameras)?;
+        let channels: Vec<&Tensor> = std::iter::once(&maps.rgb)
+            .chain(maps.depth.as_ref())
+            .chain(maps.opacity.as_ref())
+            .collect();
+        Ok(Tensor::cat(&channels, 1)?)
     }
 }
 
@@ -131,8 +145,12 @@ pub struct ViewMaps {
 }
 
 /// [`ViewMaps`] with the outputs a render configuration may leave out.
-struct OptionalMaps {
-    rgb: Tensor,
-    depth: Option<Tensor>,
-    opacity: Option<Tensor>,
+#[derive(Debug, Clone)]
+pub struct OptionalMaps {
+    /// Colour `(V, 3, h, w)`, composited on the background.
+    pub rgb: Tensor,
+    /// Normalised expected depth `(V, 1, h, w)`, when rendered.
+    pub depth: Option<Tensor>,
+    /// Opacity `(V, 1, h, w)`, when rendered.
+    pub opacity: Option<Tensor>,
 }

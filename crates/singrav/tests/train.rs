@@ -113,11 +113,23 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             Some(l.color),
             l.depth,
             l.swd,
+            l.opacity,
+            l.colour_distribution,
         ];
         assert!(
             terms.iter().flatten().all(|v| v.is_finite()),
             "scale {scale}: {l:?}"
         );
+        // The opacity reconstruction is a term of the 3D scales only.
+        assert_eq!(
+            l.opacity.is_some(),
+            *scale < config.scales(),
+            "scale {scale}"
+        );
+        // The colour distribution of generated scenes: the 3D scales' adversarial iterations.
+        let compared =
+            *scale < config.scales() && l.adversarial.is_some() && config.lambda_colour > 0.0;
+        assert_eq!(l.colour_distribution.is_some(), compared, "scale {scale}");
     }
     // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
     assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));
@@ -199,6 +211,15 @@ fn reconstruction_loss_falls() {
     assert!(
         mean(&depth[12..]) < 0.8 * mean(&depth[..4]),
         "depth {depth:?}"
+    );
+    let opacity: Vec<f32> = steps
+        .iter()
+        .filter(|(s, _)| *s == 1)
+        .map(|(_, l)| l.opacity.unwrap())
+        .collect();
+    assert!(
+        mean(&opacity[12..]) < 0.8 * mean(&opacity[..4]),
+        "opacity {opacity:?}"
     );
 }
 

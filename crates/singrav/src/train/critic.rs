@@ -80,12 +80,13 @@ impl Critic {
         Ok((loss.to_scalar::<f32>()?, gp.to_scalar::<f32>()?))
     }
 
-    /// The critic's part of an iteration: `config.d_steps` steps, each on `views_per_step`
+    /// The critic's part of an iteration: `config.d_steps` steps, each on `batch_views`
     /// random real views against the fake batch `fake_batch(views)` of as many random views;
     /// returns the mean critic loss and penalty.
     pub fn steps(
         &mut self,
         config: &TrainConfig,
+        batch_views: usize,
         real: &Tensor,
         rng: &mut rand_chacha::ChaCha8Rng,
         fake_batch: impl Fn(&[usize]) -> Result<Tensor>,
@@ -93,8 +94,8 @@ impl Critic {
         let views = real.dim(0)?;
         let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
         for _ in 0..config.d_steps {
-            let real = select(real, &pick_views(rng, views, config.views_per_step))?;
-            let fake = fake_batch(&pick_views(rng, views, config.views_per_step))?;
+            let real = select(real, &pick_views(rng, views, batch_views))?;
+            let fake = fake_batch(&pick_views(rng, views, batch_views))?;
             let (c, p) = self.step(&real, &fake, config.gp_weight, rng)?;
             critic_sum += c;
             penalty_sum += p;

@@ -121,10 +121,13 @@ impl Stage for FinalScale<'_> {
         };
         if let Some(volume) = &fake_volume {
             let (model, renderer, cameras) = (self.model, &self.renderer, &self.coarse.cameras);
-            let (critic, penalty) = self.critic.steps(self.config, &self.real, rng, |views| {
-                let coarse = render_views(renderer, volume, cameras, views)?;
-                joint(&model.upsample_images(&coarse)?, &coarse)
-            })?;
+            let batch = self.config.views(self.config.scales()).generated;
+            let (critic, penalty) =
+                self.critic
+                    .steps(self.config, batch, &self.real, rng, |views| {
+                        let coarse = render_views(renderer, volume, cameras, views)?;
+                        joint(&model.upsample_images(&coarse)?, &coarse)
+                    })?;
             losses.critic = Some(critic);
             losses.penalty = Some(penalty);
         }
@@ -132,7 +135,11 @@ impl Stage for FinalScale<'_> {
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(volume) = &fake_volume {
-                let fake_views = pick_views(rng, views, self.config.views_per_step);
+                let fake_views = pick_views(
+                    rng,
+                    views,
+                    self.config.views(self.config.scales()).generated,
+                );
                 let coarse = self.fake_rendering(volume, &fake_views)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
                 let adv = self.critic.generator_loss(&joint(&upsampled, &coarse)?)?;
@@ -145,7 +152,11 @@ impl Stage for FinalScale<'_> {
                     total = (total + swd)?;
                 }
             }
-            let rec_views = pick_views(rng, views, self.config.views_per_step);
+            let rec_views = pick_views(
+                rng,
+                views,
+                self.config.views(self.config.scales()).reconstruction,
+            );
             let rebuilt = self
                 .model
                 .upsample_images(&select(&self.reconstruction, &rec_views)?)?;

@@ -3,6 +3,7 @@
 //! checkpoints per scale and every few minutes, a JSON-lines loss log and a picture of samples
 //! after each scale.
 
+mod colour;
 mod critic;
 mod final_scale;
 mod fitted;
@@ -82,6 +83,12 @@ pub struct StepLosses {
     /// Weighted 3D comparison of the reconstruction with the fitted volume (3D scales of runs
     /// with `lambda_fitted > 0`).
     pub fitted: Option<f32>,
+    /// Weighted opacity reconstruction `lambda_opacity * mse(opacity, alpha)` (3D scales of
+    /// runs with `lambda_opacity > 0`).
+    pub opacity: Option<f32>,
+    /// Weighted colour-distribution loss of the generated scenes (3D scales' adversarial
+    /// iterations of runs with `lambda_colour > 0`).
+    pub colour_distribution: Option<f32>,
 }
 
 /// What just happened, for progress display.

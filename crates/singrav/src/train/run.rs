@@ -327,6 +327,8 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("depth reconstruction", losses.depth),
         ("SWD loss", losses.swd),
         ("fitted-volume comparison", losses.fitted),
+        ("opacity reconstruction", losses.opacity),
+        ("colour distribution", losses.colour_distribution),
     ];
     for (what, value) in terms {
         if let Some(value) = value.filter(|v| !v.is_finite()) {
@@ -473,23 +475,27 @@ fn check_same_config(saved: &TrainConfig, wanted: &TrainConfig, path: &Path) -> 
     if saved == wanted {
         return Ok(());
     }
-    let as_map = |c: &TrainConfig| serde_json::to_value(c).unwrap_or_default();
+    let as_map = |c: &TrainConfig| match serde_json::to_value(c) {
+        Ok(serde_json::Value::Object(fields)) => fields,
+        _ => serde_json::Map::new(),
+    };
     let (a, b) = (as_map(saved), as_map(wanted));
-    let differing: Vec<String> = a
-        .as_object()
-        .map(|fields| {
-            fields
-                .iter()
-                .filter(|(k, v)| b.get(k.as_str()) != Some(v))
-                .map(|(k, v)| {
-                    format!(
-                        "{k} (checkpoint {v}, requested {})",
-                        b.get(k.as_str()).cloned().unwrap_or_default()
-                    )
-                })
-                .collect()
+    // Over the fields of both: an optional field left out of one of them differs too.
+    let names: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let value = |fields: &serde_json::Map<String, serde_json::Value>, k: &str| {
+        fields.get(k).cloned().unwrap_or_default()
+    };
+    let differing: Vec<String> = names
+        .into_iter()
+        .filter(|k| a.get(k.as_str()) != b.get(k.as_str()))
+        .map(|k| {
+            format!(
+                "{k} (checkpoint {}, requested {})",
+                value(&a, k),
+                value(&b, k)
+            )
         })
-        .unwrap_or_default();
+        .collect();
     Err(Error::Checkpoint {
         path: path.to_path_buf(),
         why: format!(

@@ -8,6 +8,7 @@ use candle_core::{Tensor, D};
 use radiance_volume::RadianceVolume;
 use rand::Rng;
 
+use super::colour::colour_distribution_loss;
 use super::critic::Critic;
 use super::fitted::FittedTarget;
 use super::run::Stage;
@@ -84,15 +85,9 @@ impl<'a> VolumeScale<'a> {
     ) -> Result<Self> {
         let config = model.config();
         let renderer =
-            ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth);
-        let real = if config.use_depth {
-            Tensor::cat(
-                &[&level.images, &(&level.depths / f64::from(depth_norm))?],
-                1,
-            )?
-        } else {
-            level.images.clone()
-        };
+            ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth)
+                .with_opacity(config.critic_opacity || config.lambda_opacity > 0.0);
+        let real = critic_input(config, &level, depth_norm)?;
         let in_channels = real.dim(1)?;
         let critic = Critic::new(config, in_channels, previous_critic, model.device(), rng)?;
         let vars = model
@@ -186,27 +181,41 @@ impl Stage for VolumeScale<'_> {
         if let Some(draw) = &draw {
             let fake_volume = self.fake_volume(draw)?.detach();
             let (renderer, cameras) = (&self.renderer, &self.level.cameras);
-            let (critic, penalty) = self.critic.steps(self.config, &self.real, rng, |views| {
-                let cams: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
-                renderer.render_joined(&fake_volume, &cams)
-            })?;
+            let channels = self.real.dim(1)?;
+            let batch = self.config.views(self.n).generated;
+            let (critic, penalty) =
+                self.critic
+                    .steps(self.config, batch, &self.real, rng, |views| {
+                        let cams: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
+                        critic_view(renderer, &fake_volume, &cams, channels)
+                    })?;
             losses.critic = Some(critic);
             losses.penalty = Some(penalty);
         }
-        let (mut adversarial_sum, mut color_sum, mut depth_sum, mut fitted_sum) =
-            (0.0, 0.0, 0.0, 0.0);
+        let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
+        let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
-                let fake_views = pick_views(rng, views, self.config.views_per_step);
-                let fake = self
-                    .renderer
-                    .render_joined(&self.fake_volume(draw)?, &self.cameras(&fake_views))?;
+                let fake_views = pick_views(rng, views, self.config.views(self.n).generated);
+                let fake = critic_view(
+                    &self.renderer,
+                    &self.fake_volume(draw)?,
+                    &self.cameras(&fake_views),
+                    self.real.dim(1)?,
+                )?;
                 let adv = self.critic.generator_loss(&fake)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
+                if self.config.lambda_colour > 0.0 {
+                    let real = select(&self.level.images, &fake_views)?;
+                    let loss = (colour_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
+                        * self.config.lambda_colour)?;
+                    colour_sum_generated += loss.to_scalar::<f32>()?;
+                    total = (total + loss)?;
+                }
             }
-            let rec_views = pick_views(rng, views, self.config.views_per_step);
+            let rec_views = pick_views(rng, views, self.config.views(self.n).reconstruction);
             let reconstruction = self.reconstruction()?;
             if let Some(fitted) = &self.fitted {
                 let loss = (fitted.loss(&reconstruction, &self.config.activation())?
@@ -214,9 +223,16 @@ impl Stage for VolumeScale<'_> {
                 fitted_sum += loss.to_scalar::<f32>()?;
                 total = (total + loss)?;
             }
-            let (rgb, depth) = self
+            let maps = self
                 .renderer
-                .render(&reconstruction, &self.cameras(&rec_views))?;
+                .render_all(&reconstruction, &self.cameras(&rec_views))?;
+            let (rgb, depth) = (maps.rgb, maps.depth);
+            if let (Some(opacity), true) = (&maps.opacity, self.config.lambda_opacity > 0.0) {
+                let alpha = select(&self.level.opacity, &rec_views)?;
+                let loss = (mse(opacity, &alpha)? * self.config.lambda_opacity)?;
+                opacity_sum += loss.to_scalar::<f32>()?;
+                total = (total + loss)?;
+            }
             let color =
                 (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
             color_sum += color.to_scalar::<f32>()?;
@@ -238,6 +254,9 @@ impl Stage for VolumeScale<'_> {
         losses.depth = self.config.use_depth.then_some(depth_sum / steps);
         losses.adversarial = adversarial.then_some(adversarial_sum / steps);
         losses.fitted = self.fitted.is_some().then_some(fitted_sum / steps);
+        losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
+        losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
+            .then_some(colour_sum_generated / steps);
         Ok(losses)
     }
 
@@ -283,6 +302,32 @@ pub(super) fn reconstruction_rmse(
     Ok(f64::from(mse.to_scalar::<f32>()?).sqrt())
 }
 
+/// The critic's view of `volume` from `cameras`: colour, depth and opacity as the real batch
+/// has them (its first `channels`; the renderer may make opacity for the reconstruction loss
+/// alone).
+fn critic_view(
+    renderer: &ViewRenderer,
+    volume: &Tensor,
+    cameras: &[&volrender::Camera],
+    channels: usize,
+) -> Result<Tensor> {
+    Ok(renderer
+        .render_joined(volume, cameras)?
+        .narrow(1, 0, channels)?)
+}
+
+/// The critics' real batch `(V, C, h, w)` of a level: colour, then depth divided by
+/// `depth_norm` (with `use_depth`), then alpha (with `critic_opacity`), the channels
+/// [`ViewRenderer::render_joined`] renders for the fakes.
+fn critic_input(config: &TrainConfig, level: &DatasetLevel, depth_norm: f32) -> Result<Tensor> {
+    let depth = (&level.depths / f64::from(depth_norm))?;
+    let channels: Vec<&Tensor> = std::iter::once(&level.images)
+        .chain(config.use_depth.then_some(&depth))
+        .chain(config.critic_opacity.then_some(&level.opacity))
+        .collect();
+    Ok(Tensor::cat(&channels, 1)?)
+}
+
 /// Where a picture of a scale's samples goes.
 pub(super) fn picture_path(run_dir: &Path, scale: usize) -> std::path::PathBuf {
     run_dir.join("samples").join(format!("scale_{scale}.png"))
@@ -292,7 +337,50 @@ pub(super) fn picture_path(run_dir: &Path, scale: usize) -> std::path::PathBuf {
 mod tests {
     use candle_core::{Device, Tensor};
 
-    use super::masked_mse;
+    use super::{critic_input, masked_mse};
+    use crate::config::TrainConfig;
+    use crate::dataset::DatasetLevel;
+
+    #[test]
+    fn critic_input_stacks_colour_depth_and_alpha_as_configured() {
+        let plane = |value: f32| Tensor::full(value, (2, 1, 3, 3), &Device::Cpu).unwrap();
+        let level = DatasetLevel {
+            images: Tensor::full(0.25f32, (2, 3, 3, 3), &Device::Cpu).unwrap(),
+            depths: plane(2.0),
+            opacity: plane(0.5),
+            depth_mask: None,
+            cameras: Vec::new(),
+        };
+        let channel_means = |config: &TrainConfig| -> Vec<f32> {
+            let input = critic_input(config, &level, 4.0).unwrap();
+            let means = input.mean_keepdim(3).unwrap().mean_keepdim(2).unwrap();
+            means
+                .mean(0)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap()
+        };
+        let both = TrainConfig::preset("micro").unwrap();
+        // Colour, depth / depth_norm, alpha.
+        assert_eq!(channel_means(&both), [0.25, 0.25, 0.25, 0.5, 0.5]);
+        let no_depth = TrainConfig {
+            use_depth: false,
+            ..both.clone()
+        };
+        assert_eq!(channel_means(&no_depth), [0.25, 0.25, 0.25, 0.5]);
+        let paper_like = TrainConfig {
+            critic_opacity: false,
+            ..both
+        };
+        assert_eq!(channel_means(&paper_like), [0.25, 0.25, 0.25, 0.5]);
+        let colour_only = TrainConfig {
+            use_depth: false,
+            ..paper_like
+        };
+        assert_eq!(channel_means(&colour_only), [0.25, 0.25, 0.25]);
+    }
 
     #[test]
     fn masked_mse_counts_only_known_pixels() {
