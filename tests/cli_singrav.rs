@@ -60,8 +60,8 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(
         md.contains(
-            "| scale | seconds | peak MiB | iterations | reconstruction | depth | critic | \
-             gradient penalty | adversarial | SWD |"
+            "| scale | seconds | peak MiB | iterations | reconstruction | depth | opacity | \
+             colour distribution | critic | gradient penalty | adversarial | SWD |"
         ),
         "{md}"
     );
@@ -72,11 +72,12 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
         .find(|l| l.starts_with("| 3 |"))
         .unwrap_or_else(|| panic!("no scale 3 row in {md}"));
     let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
-    // micro: 4 iterations; the upsampler has no depth term but an SWD loss.
+    // micro: 4 iterations; the upsampler has no depth, opacity or colour-distribution term but
+    // an SWD loss.
     assert_eq!(cells[3], "4", "{row}");
-    assert_eq!(cells[5], "-", "{row}");
+    assert_eq!(cells[5..8], ["-", "-", "-"], "{row}");
     assert_eq!(
-        cells[9],
+        cells[11],
         format!("{:.4}", last["swd"].as_f64().unwrap()),
         "{row}"
     );
