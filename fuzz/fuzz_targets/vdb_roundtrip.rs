@@ -10,7 +10,11 @@ use radiance_volume::{Aabb, Error, GridDims, RadianceVolume};
 fuzz_target!(|input: (u8, u8, u8, bool, bool, u8, Vec<f32>)| {
     let (d, h, w, half, zlib, threshold, values) = input;
     // Cap the size first: at most 20^3 voxels.
-    let dims = GridDims::new(usize::from(d % 20) + 1, usize::from(h % 20) + 1, usize::from(w % 20) + 1);
+    let dims = GridDims::new(
+        usize::from(d % 20) + 1,
+        usize::from(h % 20) + 1,
+        usize::from(w % 20) + 1,
+    );
     if values.is_empty() {
         return;
     }
@@ -22,7 +26,13 @@ fuzz_target!(|input: (u8, u8, u8, bool, bool, u8, Vec<f32>)| {
     let v = RadianceVolume::new(t, Aabb::CUBE).expect("a valid tensor");
     let threshold = f32::from(threshold) / 16.0;
     let mut bytes = Vec::new();
-    match v.write_vdb().half(half).zlib(zlib).threshold(threshold).to_writer(&mut bytes) {
+    match v
+        .write_vdb()
+        .half(half)
+        .zlib(zlib)
+        .threshold(threshold)
+        .to_writer(&mut bytes)
+    {
         Ok(_) => {}
         Err(Error::NonFinite { .. }) => {
             assert!(data.iter().any(|x| !x.is_finite()));
@@ -35,7 +45,13 @@ fuzz_target!(|input: (u8, u8, u8, bool, bool, u8, Vec<f32>)| {
     let back = RadianceVolume::read_vdb_bytes(bytes, v.grid(), "fuzz.vdb".as_ref())
         .expect("our own file reads back");
     let got: Vec<f32> = back.tensor().flatten_all().unwrap().to_vec1().unwrap();
-    let round = |x: f32| if half { half::f16::from_f32(x).to_f32() } else { x };
+    let round = |x: f32| {
+        if half {
+            half::f16::from_f32(x).to_f32()
+        } else {
+            x
+        }
+    };
     for i in 0..n {
         let active = data[i] > threshold;
         for c in 0..4 {

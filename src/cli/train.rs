@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use singrav::checkpoint::CHECKPOINT_FILE;
 use singrav::dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
@@ -101,6 +102,10 @@ pub struct TrainOptions {
     /// Weight of the fitted-volume comparison (with --fitted or --fit).
     #[arg(long, value_name = "W", default_value_t = DEFAULT_LAMBDA_FITTED)]
     pub lambda_fitted: f64,
+    /// Set any field of the configuration (config.json's names) to a JSON value, after the
+    /// preset and the flags above: `--set lambda_color=50 --set channels=32`. Repeatable.
+    #[arg(long = "set", value_name = "FIELD=VALUE")]
+    pub settings: Vec<String>,
     /// Keep every N-th view (0, N, 2N, ...) out of training; `volgen eval` reports the
     /// reconstruction on them separately (fit against 3D consistency). Recorded in the run.
     #[arg(long, value_name = "N")]
@@ -147,6 +152,14 @@ impl TrainOptions {
             config.lambda_fitted = self.lambda_fitted;
         }
         config.holdout = self.holdout;
+        for setting in &self.settings {
+            let (field, value) = setting.split_once('=').with_context(|| {
+                format!("--set {setting}: expected FIELD=VALUE, e.g. --set lambda_color=50")
+            })?;
+            config = config
+                .with_setting(field.trim(), value.trim())
+                .with_context(|| format!("--set {setting}"))?;
+        }
         config.validate()?;
         Ok(config)
     }
@@ -174,6 +187,7 @@ impl TrainOptions {
             resume: self.resume,
             vgg19_weights: self.vgg19.clone(),
             fitted_volume,
+            ..RunOptions::default()
         })
     }
 }
@@ -228,6 +242,12 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
     config.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
     let options = args.options.run_options(&config, &dataset, &args.out)?;
+    if options.resume && args.out.is_dir() && !args.out.join(CHECKPOINT_FILE).exists() {
+        eprintln!(
+            "{} holds no checkpoint yet: training from the beginning",
+            args.out.display()
+        );
+    }
     train_with_progress(&config, &dataset, &args.out, &options)?;
     println!("trained model: {}", args.out.display());
     Ok(())

@@ -53,6 +53,22 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// Writing a file of known size failed part-way (a full disk, a file-size limit). The write
+    /// went to a temporary file, which is removed: a file already at `path` is unchanged.
+    #[error(
+        "{}: could not write its {bytes} bytes ({source}); a previous version of the file, if \
+         any, is unchanged",
+        path.display()
+    )]
+    Write {
+        /// The file being written (its final name).
+        path: PathBuf,
+        /// The size of the whole file.
+        bytes: u64,
+        /// The underlying I/O error.
+        #[source]
+        source: std::io::Error,
+    },
     /// An error from candle (device, dtype or tensor operation).
     #[error(transparent)]
     Candle(#[from] candle_core::Error),

@@ -120,3 +120,28 @@ fn unwritable_directory_and_missing_slices_are_errors() {
     assert!(err.to_string().contains("v.0001.exr"), "{err}");
     assert!(v.write_exr_slices().to_dir(dir.path(), "a/b").is_err());
 }
+
+#[test]
+fn a_re_export_that_fails_part_way_leaves_no_stack_the_reader_accepts() {
+    let dims = GridDims::new(3, 2, 2);
+    let dir = tempfile::tempdir().unwrap();
+    volume(dims)
+        .write_exr_slices()
+        .to_dir(dir.path(), "v")
+        .unwrap();
+    // A second export over it fails at slice 1 (its name is taken by a directory): the old
+    // sidecar must not survive to describe a mix of old and new slices.
+    let blocked = dir.path().join("v.0001.exr");
+    std::fs::remove_file(&blocked).unwrap();
+    std::fs::create_dir(&blocked).unwrap();
+    let t = Tensor::from_vec(
+        vec![0.5f32; 4 * dims.voxel_count()],
+        (4, 3, 2, 2),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let other = RadianceVolume::new(t, Aabb::CUBE).unwrap();
+    assert!(other.write_exr_slices().to_dir(dir.path(), "v").is_err());
+    let err = RadianceVolume::read_exr_slices(dir.path(), "v").unwrap_err();
+    assert!(err.to_string().contains("v.json"), "{err}");
+}

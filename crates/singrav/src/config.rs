@@ -449,6 +449,50 @@ impl TrainConfig {
         Ok(self)
     }
 
+    /// Sets one field by name to a JSON value, as `volgen train --set FIELD=VALUE` does: for
+    /// the settings without a flag of their own (a loss weight, the channels, the schedule).
+    /// `value` is read as JSON (`50`, `true`, `[240, 160]`), and as a string where it is not
+    /// JSON. Call [`TrainConfig::validate`] after the last change.
+    ///
+    /// ```
+    /// use singrav::TrainConfig;
+    /// let config = TrainConfig::preset("tiny")?.with_setting("lambda_color", "50")?;
+    /// assert_eq!(config.lambda_color, 50.0);
+    /// assert!(TrainConfig::preset("tiny")?.with_setting("lambda_colr", "1").is_err());
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming the field when it does not exist or the value is not of its
+    /// type.
+    pub fn with_setting(self, field: &str, value: &str) -> Result<Self> {
+        let mut fields = match serde_json::to_value(&self) {
+            Ok(serde_json::Value::Object(fields)) => fields,
+            other => {
+                return Err(invalid(
+                    field,
+                    format!("cannot list the settings: {other:?}"),
+                ))
+            }
+        };
+        let Some(slot) = fields.get_mut(field) else {
+            let known: Vec<&str> = fields.keys().map(String::as_str).collect();
+            return Err(invalid(
+                field,
+                format!("no such setting; the settings are {}", known.join(", ")),
+            ));
+        };
+        let parsed = serde_json::from_str(value)
+            .unwrap_or_else(|_| serde_json::Value::String(value.to_string()));
+        let was = std::mem::replace(slot, parsed);
+        serde_json::from_value(serde_json::Value::Object(fields)).map_err(|e| {
+            invalid(
+                field,
+                format!("`{value}` is not a value of this setting (it was {was}): {e}"),
+            )
+        })
+    }
+
     /// Checks that the sizes agree and every setting is in range.
     pub fn validate(&self) -> Result<()> {
         if !(self.lambda_fitted >= 0.0 && self.lambda_fitted.is_finite()) {

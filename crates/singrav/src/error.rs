@@ -49,16 +49,27 @@ pub enum Error {
         /// What was expected.
         why: String,
     },
-    /// Training diverged (a loss became NaN or infinite).
-    #[error("training diverged at scale {scale}, step {step}: {what} is {value}")]
+    /// Training diverged (a loss or a gradient became NaN or infinite). Nothing of the bad
+    /// iteration was saved: the run directory's last checkpoint is intact.
+    #[error(
+        "training diverged at scale {scale}, iteration {step}: {what}; nothing of this \
+         iteration was saved, the run directory keeps its last checkpoint"
+    )]
     Diverged {
         /// The scale (1-based).
         scale: usize,
-        /// The step within the scale.
+        /// The iteration within the scale (0-based).
         step: usize,
-        /// The loss that went bad.
-        what: &'static str,
-        /// Its value.
+        /// What went bad and its value, e.g. `critic loss is NaN`.
+        what: String,
+    },
+    /// An optimiser was given a gradient with a NaN or infinite element; no variable was
+    /// updated. Training reports it as [`Error::Diverged`].
+    #[error("the gradient of {parameter} is not finite (its sum of squares is {value})")]
+    NonFiniteGradient {
+        /// The variable's name.
+        parameter: String,
+        /// The gradient's sum of squares.
         value: f32,
     },
     /// An error from radiance-volume.

@@ -56,7 +56,12 @@ impl Adam {
 
     /// One update of every variable that has a gradient in `grads` (the others keep their
     /// values and moments).
+    ///
+    /// # Errors
+    /// [`crate::Error::NonFiniteGradient`] naming the first variable whose gradient holds a NaN
+    /// or an infinity; then nothing is updated and the step is not counted.
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.check_finite(grads)?;
         self.steps += 1;
         let (b1, b2) = self.betas;
         let t = self.steps as i32;
@@ -77,6 +82,25 @@ impl Adam {
             var.set(&var.as_tensor().sub(&update)?)?;
             self.first[i] = m;
             self.second[i] = v;
+        }
+        Ok(())
+    }
+
+    /// Errors unless every gradient in `grads` is finite (checked through its sum of squares,
+    /// which is NaN or infinite if any element is; it may also overflow for huge finite
+    /// gradients, which would wreck the step all the same).
+    fn check_finite(&self, grads: &GradStore) -> Result<()> {
+        for (name, var) in &self.params {
+            let Some(grad) = grads.get(var.as_tensor()) else {
+                continue;
+            };
+            let value = grad.detach().sqr()?.sum_all()?.to_scalar::<f32>()?;
+            if !value.is_finite() {
+                return Err(crate::Error::NonFiniteGradient {
+                    parameter: name.clone(),
+                    value,
+                });
+            }
         }
         Ok(())
     }
@@ -122,5 +146,41 @@ impl Adam {
         }
         self.steps = steps;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{Device, Var};
+
+    use super::Adam;
+
+    #[test]
+    fn a_non_finite_gradient_names_the_variable_and_updates_nothing() {
+        let a = Var::new(&[1f32, 2.0], &Device::Cpu).unwrap();
+        let b = Var::new(&[3f32], &Device::Cpu).unwrap();
+        let mut adam = Adam::new(
+            vec![("a".into(), a.clone()), ("b".into(), b.clone())],
+            0.1,
+            (0.9, 0.999),
+        )
+        .unwrap();
+        // d/da = 1 (finite), d/db = 0.5 / sqrt(b - 3) at b = 3: infinite.
+        let loss = (a.as_tensor().sum_all().unwrap()
+            + (b.as_tensor() - 3.0)
+                .unwrap()
+                .sqrt()
+                .unwrap()
+                .sum_all()
+                .unwrap())
+        .unwrap();
+        let err = adam.step(&loss.backward().unwrap()).unwrap_err();
+        assert!(
+            matches!(&err, crate::Error::NonFiniteGradient { parameter, .. } if parameter == "b"),
+            "{err}"
+        );
+        assert_eq!(adam.steps(), 0);
+        assert_eq!(a.as_tensor().to_vec1::<f32>().unwrap(), [1.0, 2.0]);
+        assert_eq!(b.as_tensor().to_vec1::<f32>().unwrap(), [3.0]);
     }
 }

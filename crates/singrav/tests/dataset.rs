@@ -312,3 +312,21 @@ fn blender_style_names_and_exr_depth_load() {
     let got = values(&data.level(24, 24, &Device::Cpu).unwrap().depths);
     assert_eq!(got[..24 * 24], want[..24 * 24]);
 }
+
+#[test]
+fn a_rewrite_that_fails_part_way_leaves_no_dataset_the_loader_accepts() {
+    let dir = written(SceneKind::StandingStones);
+    assert!(Dataset::load(dir.path(), BACKGROUND).is_ok());
+    // Rewriting with other cameras fails at view 2 (its depth map's name is taken by a
+    // directory): the old transforms.json must not survive to describe the new images.
+    let blocked = dir.path().join("depth/r_002.png");
+    std::fs::remove_file(&blocked).unwrap();
+    std::fs::create_dir(&blocked).unwrap();
+    let other = DatasetSpec { seed: 6, ..SPEC };
+    assert!(write_dataset(&*SceneKind::StandingStones.build(1), dir.path(), &other).is_err());
+    assert!(!dir.path().join("transforms.json").exists());
+    let err = Dataset::load(dir.path(), BACKGROUND)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("transforms.json"), "{err}");
+}

@@ -337,6 +337,82 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
 }
 
 #[test]
+fn a_nan_stops_the_run_at_once_and_resume_continues_from_the_last_good_checkpoint() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = TrainConfig {
+        checkpoint_iterations: 1,
+        ..micro()
+    };
+    run_to_end(&config, &data, &tmp.path().join("whole"));
+
+    // G_2's weights turn NaN before iteration 2 of scale 2.
+    let run = tmp.path().join("poisoned");
+    let poisoned = RunOptions {
+        poison: Some((2, 2)),
+        ..RunOptions::default()
+    };
+    let err = train(&config, &data, &run, &poisoned, &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .err()
+    .expect("a NaN generator must stop the run");
+    let Error::Diverged {
+        scale, step, what, ..
+    } = &err
+    else {
+        panic!("expected Diverged, got {err}");
+    };
+    assert_eq!((*scale, *step), (2, 2), "{err}");
+    assert!(!what.is_empty(), "{err}");
+    let message = err.to_string();
+    assert!(
+        message.contains("scale 2, iteration 2") && message.contains("last checkpoint"),
+        "{message}"
+    );
+    // Nothing of the bad iteration was saved: the checkpoint is the one after iteration 1,
+    // every weight finite, and the log ends before the bad iteration.
+    let saved = Checkpoint::load(&run.join(CHECKPOINT_FILE), &Device::Cpu).unwrap();
+    assert_eq!((saved.state.scale, saved.state.iteration), (2, 2));
+    for (name, tensor) in &saved.tensors {
+        let values: Vec<f32> = tensor.flatten_all().unwrap().to_vec1().unwrap();
+        assert!(values.iter().all(|v| v.is_finite()), "{name}");
+    }
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), config.scale_schedule(1).iterations + 2);
+
+    // Resumed (without the poison), the run ends as the uninterrupted one did.
+    let resumed = train(&config, &data, &run, &resume(), &Device::Cpu, &mut |_| {
+        Control::Continue
+    })
+    .unwrap();
+    assert!(matches!(resumed, TrainOutcome::Finished(_)));
+    assert_same_tensors(
+        &checkpoint_tensors(&tmp.path().join("whole")),
+        &checkpoint_tensors(&run),
+    );
+}
+
+#[test]
+fn resume_of_a_run_killed_before_its_first_checkpoint_starts_over() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = micro();
+    run_to_end(&config, &data, &tmp.path().join("whole"));
+    // What a kill before the first checkpoint leaves: config.json and part of the log.
+    let run = tmp.path().join("early");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(run.join("log.jsonl"), "{\"scale\":1,\"iteration\":0,\"sec").unwrap();
+    run_with(&config, &data, &run, &resume());
+    assert_same_tensors(
+        &checkpoint_tensors(&tmp.path().join("whole")),
+        &checkpoint_tensors(&run),
+    );
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), config.total_iterations());
+}
+
+#[test]
 fn resume_refuses_another_configuration_and_names_the_field() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));

@@ -45,6 +45,16 @@ impl Sampler {
 /// the kernel's precision, which is exact for f32 up to `2^24`.
 pub const MAX_SAMPLES_PER_RAY: usize = 1 << 24;
 
+/// The range the renderer accepts, so that every product in the forward and backward passes
+/// stays finite in f32 (found by fuzzing: a box 1e37 wide rendered finite images whose
+/// gradients overflowed): colours at most this in magnitude (density may be any finite value
+/// >= 0), ...
+pub const MAX_VOLUME_VALUE: f32 = 1e10;
+/// ... box corners and ray origins within this of the origin in every coordinate, ...
+pub const MAX_COORDINATE: f32 = 1e8;
+/// ... and ray directions at least this long (a ray's parameter t grows as 1 / |d|).
+pub const MIN_DIRECTION_LENGTH: f32 = 1e-4;
+
 /// Which outputs besides colour to compute (the others are not computed at all).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Outputs {
@@ -205,6 +215,16 @@ impl RenderConfig {
             ));
         }
         Aabb::try_new(self.aabb.min, self.aabb.max)?;
+        let reach = self.aabb.min.abs().max(self.aabb.max.abs()).max_element();
+        if reach > MAX_COORDINATE {
+            return Err(invalid(
+                "aabb",
+                format!(
+                    "box corners must lie within {MAX_COORDINATE:e} of the origin, got {:?}..{:?}",
+                    self.aabb.min, self.aabb.max
+                ),
+            ));
+        }
         Ok(())
     }
 }

@@ -18,7 +18,7 @@ use radiance_volume::GridDims;
 use rayon::prelude::*;
 
 use crate::buffer_pool::{self, Pooled};
-use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY};
+use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE};
 use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
@@ -366,7 +366,12 @@ fn interleave<T: Pooled>(
     /// Voxels per parallel task.
     const CHUNK: usize = 4096;
     let voxels = dims.voxel_count();
-    let bad = |v: &[T; 4]| !v.iter().all(|x| x.is_finite()) || v[0] < T::zero();
+    let limit = T::of(f64::from(MAX_VOLUME_VALUE));
+    // Density may be any finite value >= 0 (the kernel is exact up to f32::MAX); colours are
+    // bounded so that their products with segment lengths stay finite in the backward pass.
+    let bad = |v: &[T; 4]| {
+        !(v[0].is_finite() && v[0] >= T::zero() && v[1..].iter().all(|x| x.abs() <= limit))
+    };
     (0..n)
         .map(|b| {
             let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
@@ -391,7 +396,8 @@ fn interleave<T: Pooled>(
             if count > 0 {
                 // (The buffer is not given back: errors are not the path to optimise.)
                 let i = data.iter().position(bad).unwrap_or(0);
-                let c = (0..4).find(|&c| !data[i][c].is_finite()).unwrap_or(0);
+                let colour_ok = |x: T| x.abs() <= limit;
+                let c = (1..4).find(|&c| !colour_ok(data[i][c])).unwrap_or(0);
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
                 return Err(Error::InvalidVolume {
                     count,
@@ -400,7 +406,8 @@ fn interleave<T: Pooled>(
                         radiance_volume::BASE_CHANNELS[c],
                         data[i][c]
                     ),
-                    why: "values must be finite and density (channel 0) must be >= 0",
+                    why: "density (channel 0) must be finite and >= 0, colours finite and at \
+                          most 1e10 in magnitude",
                 });
             }
             Ok(data)

@@ -7,6 +7,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::camera::Camera;
+use crate::config::{MAX_COORDINATE, MIN_DIRECTION_LENGTH};
 use crate::error::{invalid, Result};
 
 /// A bundle of rays: origins and directions in world space, `R` of each. Directions need not
@@ -39,21 +40,26 @@ impl Rays {
                 format!("{} origins but {} directions", origins.len(), dirs.len()),
             ));
         }
-        let bad = |v: &[f32; 3]| !v.iter().all(|x| x.is_finite());
-        if let Some(i) = origins.iter().position(bad) {
-            return Err(invalid(
-                "rays",
-                format!("origin {i} is not finite: {:?}", origins[i]),
-            ));
-        }
-        if let Some(i) = dirs
-            .iter()
-            .position(|d| bad(d) || d.iter().all(|&x| x == 0.0))
-        {
+        let far = |v: &[f32; 3]| !v.iter().all(|x| x.abs() <= MAX_COORDINATE);
+        if let Some(i) = origins.iter().position(far) {
             return Err(invalid(
                 "rays",
                 format!(
-                    "direction {i} must be finite and non-zero, got {:?}",
+                    "origin {i} must be finite and within {MAX_COORDINATE:e} of the origin, got {:?}",
+                    origins[i]
+                ),
+            ));
+        }
+        let short = |d: &[f32; 3]| {
+            let length = d.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>().sqrt();
+            !(length >= f64::from(MIN_DIRECTION_LENGTH) && length <= f64::from(MAX_COORDINATE))
+        };
+        if let Some(i) = dirs.iter().position(short) {
+            return Err(invalid(
+                "rays",
+                format!(
+                    "direction {i} must be finite, at least {MIN_DIRECTION_LENGTH:e} and at most \
+                     {MAX_COORDINATE:e} long, got {:?}",
                     dirs[i]
                 ),
             ));

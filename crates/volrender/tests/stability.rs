@@ -188,3 +188,55 @@ fn bad_arguments_are_rejected() {
         volrender::render_batch(&batch, &[rays.clone(), rays], &RenderConfig::default()).is_err()
     );
 }
+
+/// Found by fuzzing (`fuzz/fuzz_targets/render.rs`): a box 1e37 wide and a ray 3.5e8 long per
+/// unit of t rendered finite images whose gradient overflowed. Such scales are now refused by
+/// name, and the largest accepted ones keep outputs and gradients finite.
+#[test]
+fn scales_whose_gradients_would_overflow_are_refused_and_the_largest_accepted_stay_finite() {
+    use radiance_volume::Aabb;
+    use volrender::{Rays, MAX_COORDINATE, MIN_DIRECTION_LENGTH};
+    let huge = Aabb::try_new([0.0, -2.8e10, -1.7e38].into(), [2.1e37; 3].into()).unwrap();
+    let cfg = RenderConfig::default().with_aabb(huge);
+    let ray = Rays::new(vec![[0.0; 3]], vec![[0.0, 0.0, 1.0]]).unwrap();
+    let vol = constant_volume((2, 2, 2), 1.0, DType::F32);
+    let err = render(&vol, &ray, &cfg).unwrap_err().to_string();
+    assert!(err.contains("aabb"), "{err}");
+    let err = Rays::new(vec![[2.1e37, 0.0, 0.0]], vec![[0.0, 0.0, 1.0]]).unwrap_err();
+    assert!(err.to_string().contains("origin 0"), "{err}");
+    let err = Rays::new(vec![[0.0; 3]], vec![[1e-6, 0.0, 0.0]]).unwrap_err();
+    assert!(err.to_string().contains("direction 0"), "{err}");
+    let bright = (constant_volume((2, 2, 2), 1.0, DType::F32) * 1e20).unwrap();
+    let err = render(&bright, &ray, &RenderConfig::default()).unwrap_err();
+    assert!(matches!(err, Error::InvalidVolume { .. }), "{err}");
+
+    // The extremes that are accepted: the widest box, a far origin, the shortest direction,
+    // the brightest colours, the densest density.
+    let m = MAX_COORDINATE;
+    let widest = Aabb::try_new([-m; 3].into(), [m; 3].into()).unwrap();
+    let cfg = RenderConfig::default()
+        .with_aabb(widest)
+        .with_depth(true)
+        .with_opacity(true);
+    let rays = Rays::new(
+        vec![[-m, -m, -m], [0.0, 0.0, 0.0]],
+        vec![[MIN_DIRECTION_LENGTH, 0.0, 0.0], [0.3, -0.2, 0.9]],
+    )
+    .unwrap();
+    for sigma in [1e-30, 1.0, f32::MAX] {
+        let s = Tensor::full(sigma, (1, 2, 2, 2), &Device::Cpu).unwrap();
+        let c = Tensor::full(-1e10f32, (3, 2, 2, 2), &Device::Cpu).unwrap();
+        let var = Var::from_tensor(&Tensor::cat(&[s, c], 0).unwrap()).unwrap();
+        let out = render(var.as_tensor(), &rays, &cfg).unwrap();
+        let (depth, opacity) = (out.depth.unwrap(), out.opacity.unwrap());
+        for t in [&out.rgb, &depth, &opacity] {
+            assert!(values(t).iter().all(|v| v.is_finite()), "sigma {sigma}");
+        }
+        let loss = (out.rgb.sum_all().unwrap() + depth.sum_all().unwrap()).unwrap();
+        let grad = values(loss.backward().unwrap().get(&var).unwrap());
+        assert!(
+            grad.iter().all(|g| g.is_finite()),
+            "sigma {sigma}: {grad:?}"
+        );
+    }
+}

@@ -53,8 +53,29 @@ pub fn write_atomic(
 /// assert_eq!(std::fs::read(&path)?, b"hi");
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
+///
+/// # Errors
+/// [`Error::Write`] naming `path` and the size when the bytes do not fit (a full disk, a
+/// file-size limit); [`Error::Io`] for other failures.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, |w| w.write_all(bytes).map_err(io_error(path)))
+    write_atomic(path, |w| w.write_all(bytes).map_err(io_error(path))).map_err(|e| match e {
+        Error::Io { source, .. } if out_of_space(&source) => Error::Write {
+            path: path.to_path_buf(),
+            bytes: bytes.len() as u64,
+            source,
+        },
+        other => other,
+    })
+}
+
+/// Whether a write failed for want of space: a full disk or quota, or a file-size limit.
+fn out_of_space(error: &std::io::Error) -> bool {
+    matches!(
+        error.kind(),
+        std::io::ErrorKind::StorageFull
+            | std::io::ErrorKind::QuotaExceeded
+            | std::io::ErrorKind::FileTooLarge
+    )
 }
 
 /// Checks, before any expensive work, that a file can be created in `path`'s directory (the

@@ -214,6 +214,14 @@ impl ExrSlicesWriter<'_> {
         let paths: Vec<PathBuf> = (0..dims.d)
             .map(|z| slice_path(dir, name, z, dims.d))
             .collect();
+        // Over an earlier export the old sidecar goes first (the new one comes last), so an
+        // export killed part-way never leaves old metadata over a mix of old and new slices.
+        match std::fs::remove_file(&sidecar_path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(io_error(&sidecar_path)(e));
+            }
+            _ => {}
+        }
 
         let written = volume.with_values(|values| {
             paths

@@ -105,6 +105,15 @@ pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Resul
     for sub in ["images", "depth"] {
         create_dir(&dir.join(sub))?;
     }
+    // Rewriting a dataset: its transforms.json goes first and comes back last, so a run killed
+    // in between leaves a directory the loader refuses, not old cameras over new images.
+    let transforms_path = dir.join("transforms.json");
+    match std::fs::remove_file(&transforms_path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(crate::error::io_error(&transforms_path)(e));
+        }
+        _ => {}
+    }
     let volume = scene.to_volume(GridDims::cube(spec.grid))?;
     let fov_x = PAPER_FOV_DEG.to_radians();
     let cameras = Camera::hemisphere(
@@ -142,12 +151,11 @@ pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Resul
         "depth_kind": "expected",
         "frames": frames,
     });
-    let path = dir.join("transforms.json");
     let text = serde_json::to_string_pretty(&transforms)
         .map_err(|e| invalid("transforms.json", e.to_string()))?;
-    write_bytes(&path, text.as_bytes())?;
+    write_bytes(&transforms_path, text.as_bytes())?;
     Ok(DatasetSummary {
-        transforms: path,
+        transforms: transforms_path,
         views: spec.views,
         resolution: spec.resolution,
         seconds: start.elapsed().as_secs_f64(),

@@ -43,7 +43,9 @@ pub fn peak_memory_mib() -> Option<f64> {
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RunOptions {
     /// Continue from the run directory's checkpoint (which must have been made with the same
-    /// configuration); without it, a directory holding a checkpoint is refused.
+    /// configuration); without it, a directory holding a checkpoint is refused. An existing
+    /// directory without a checkpoint yet (a run killed before its first one) starts from the
+    /// beginning; a directory that does not exist is an error.
     pub resume: bool,
     /// The VGG-19 weights (safetensors with torchvision's names; docs/swd-loss.md shows how to
     /// convert them) for a configuration whose `swd_features` is
@@ -53,6 +55,11 @@ pub struct RunOptions {
     /// `lambda_fitted` is positive; required then (unless resuming a run, which keeps its own
     /// copy as `fitted.safetensors`), refused otherwise.
     pub fitted_volume: Option<PathBuf>,
+    /// Test hook: before iteration `.1` (0-based) of scale `.0`, every weight of that scale's
+    /// generator becomes NaN, so tests can check that a divergence stops the run at once and
+    /// leaves the last checkpoint intact.
+    #[doc(hidden)]
+    pub poison: Option<(usize, usize)>,
 }
 
 /// What an observer tells the trainer after a step.

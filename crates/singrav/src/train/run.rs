@@ -95,13 +95,20 @@ pub fn train(
     };
     let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
     let fitted = load_fitted_target(config, options, run_dir)?;
-    let resume = options.resume;
+    let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
+    if options.resume && !run_dir.exists() {
+        return Err(Error::Checkpoint {
+            path: checkpoint_file,
+            why: "no checkpoint here, nor a run directory (train a model first)".into(),
+        });
+    }
     crate::io::create_dir(run_dir)?;
     if let Some((volume, true)) = &fitted {
         volume.save_safetensors(run_dir.join(FITTED_FILE))?;
     }
     let fitted = fitted.map(|(volume, _)| volume);
-    let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
+    // A run killed before its first checkpoint has nothing to resume: it starts over.
+    let resume = options.resume && checkpoint_file.exists();
     let (mut model, mut state, saved) = if resume {
         let checkpoint = Checkpoint::load(&checkpoint_file, device)?;
         check_same_config(&checkpoint.config, config, &checkpoint_file)?;
@@ -211,10 +218,15 @@ pub fn train(
         while state.iteration < schedule.iterations {
             let it = state.iteration;
             let started = Instant::now();
-            let losses = stage.iteration(
-                it >= schedule.reconstruction_only,
-                &mut step_rng(config.seed, n, it),
-            )?;
+            if options.poison == Some((n, it)) {
+                poison(&model, n)?;
+            }
+            let losses = stage
+                .iteration(
+                    it >= schedule.reconstruction_only,
+                    &mut step_rng(config.seed, n, it),
+                )
+                .map_err(|e| diverged(e, n, it))?;
             check_finite(&losses, n, it)?;
             state.current_seconds += started.elapsed().as_secs_f64();
             state.iteration += 1;
@@ -335,10 +347,43 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
             return Err(Error::Diverged {
                 scale,
                 step,
-                what,
-                value,
+                what: format!("the {what} is {value}"),
             });
         }
+    }
+    Ok(())
+}
+
+/// An iteration's error as [`Error::Diverged`] at scale `n`, iteration `it` when it says that
+/// something went non-finite (a gradient, a generated volume the renderer refuses).
+fn diverged(error: Error, n: usize, it: usize) -> Error {
+    let what = match error {
+        Error::NonFiniteGradient { parameter, value } => {
+            format!("the gradient of {parameter} is not finite (its sum of squares is {value})")
+        }
+        Error::Render(volrender::Error::InvalidVolume { count, first, why }) => {
+            format!("a generated volume has {count} invalid values, first at {first} ({why})")
+        }
+        other => return other,
+    };
+    Error::Diverged {
+        scale: n,
+        step: it,
+        what,
+    }
+}
+
+/// The test hook [`RunOptions::poison`]: sets every weight of scale `n`'s generator (or the
+/// upsampler) to NaN, as a divergence would.
+fn poison(model: &SinGrav, n: usize) -> Result<()> {
+    let vars = match model.generator_vars(n) {
+        Some(vars) => vars,
+        None => model
+            .upsampler_vars()
+            .ok_or_else(|| invalid("poison", format!("scale {n} has no generator yet")))?,
+    };
+    for var in vars.all_vars() {
+        var.set(&(var.as_tensor() * f64::NAN)?)?;
     }
     Ok(())
 }

@@ -1,0 +1,83 @@
+//! The renderer on arbitrary small volumes (any values: NaN, negative density, huge), boxes,
+//! rays (any origin and direction, zero and huge ones) and options, forward and backward.
+//! It must return finite images and gradients, or an error; never panic.
+#![no_main]
+
+use arbitrary::Arbitrary;
+use candle_core::{Device, Tensor, Var};
+use libfuzzer_sys::fuzz_target;
+use radiance_volume::Aabb;
+use volrender::{render, Rays, RenderConfig, Sampler};
+
+#[derive(Arbitrary, Debug)]
+struct Input {
+    dims: (u8, u8, u8),
+    values: Vec<f32>,
+    aabb: ([f32; 3], [f32; 3]),
+    rays: Vec<([f32; 3], [f32; 3])>,
+    sampler: u8,
+    samples: u8,
+    epsilon: f32,
+    skip_empty: bool,
+    background: Option<[f32; 3]>,
+}
+
+fn finite(t: &Tensor) -> bool {
+    let values: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
+    values.iter().all(|v| v.is_finite())
+}
+
+fuzz_target!(|input: Input| {
+    let (d, h, w) = (
+        usize::from(input.dims.0 % 6) + 1,
+        usize::from(input.dims.1 % 6) + 1,
+        usize::from(input.dims.2 % 6) + 1,
+    );
+    if input.values.is_empty() || input.rays.is_empty() || input.rays.len() > 64 {
+        return;
+    }
+    let n = 4 * d * h * w;
+    let data: Vec<f32> = input.values.iter().copied().cycle().take(n).collect();
+    let volume =
+        Var::from_tensor(&Tensor::from_vec(data, (4, d, h, w), &Device::Cpu).unwrap()).unwrap();
+    let Ok(aabb) = Aabb::try_new(input.aabb.0.into(), input.aabb.1.into()) else {
+        return;
+    };
+    let (origins, dirs): (Vec<_>, Vec<_>) = input.rays.iter().copied().unzip();
+    let Ok(rays) = Rays::new(origins, dirs) else {
+        return;
+    };
+    let samples = usize::from(input.samples % 32) + 1;
+    let sampler = match input.sampler % 3 {
+        0 => Sampler::Uniform { samples },
+        1 => Sampler::UniformLeft { samples },
+        _ => Sampler::PerVoxel {
+            per_voxel: samples % 4 + 1,
+        },
+    };
+    let mut cfg = RenderConfig::default()
+        .with_sampler(sampler)
+        .with_epsilon(input.epsilon)
+        .with_skip_empty(input.skip_empty)
+        .with_aabb(aabb)
+        .with_depth(true)
+        .with_opacity(true);
+    if let Some(background) = input.background {
+        cfg = cfg.with_background(background);
+    }
+    let Ok(out) = render(volume.as_tensor(), &rays, &cfg) else {
+        return;
+    };
+    let depth = out.depth.unwrap();
+    let opacity = out.opacity.unwrap();
+    assert!(
+        finite(&out.rgb) && finite(&depth) && finite(&opacity),
+        "non-finite output"
+    );
+    let loss = (out.rgb.sum_all().unwrap() + depth.sum_all().unwrap() + opacity.sum_all().unwrap())
+        .unwrap();
+    let grads = loss.backward().unwrap();
+    if let Some(grad) = grads.get(volume.as_tensor()) {
+        assert!(finite(grad), "non-finite gradient");
+    }
+});

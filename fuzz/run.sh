@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# Builds and runs every cargo-fuzz target of volgen for SECONDS each (default 60), then prints
+# one row per target: executions, coverage (libFuzzer's `cov`, edges reached), corpus size and
+# crashes. Exits non-zero if any target crashed; the crashing inputs are in artifacts/TARGET/.
+#
+#   fuzz/run.sh [SECONDS]            every target, one after the other
+#   JOBS=2 fuzz/run.sh 600           two targets at a time (one core each)
+#   TARGETS="render dataset" fuzz/run.sh 60
+#
+# Works on a fresh machine: installs cargo-fuzz from crates.io if missing, and uses the nightly
+# toolchain when rustup has one, else the stable one with RUSTC_BOOTSTRAP=1 (cargo-fuzz needs
+# nightly's -Z flags for the sanitizer and coverage instrumentation).
+set -euo pipefail
+SECONDS_EACH="${1:-60}"
+JOBS="${JOBS:-1}"
+cd "$(dirname "$0")"
+
+if ! cargo fuzz --version >/dev/null 2>&1; then
+  echo "installing cargo-fuzz"
+  cargo install cargo-fuzz --locked
+fi
+if rustup toolchain list 2>/dev/null | grep -q '^nightly'; then
+  FUZZ_CMD="cargo +nightly fuzz"
+else
+  export RUSTC_BOOTSTRAP=1
+  FUZZ_CMD="cargo fuzz"
+fi
+
+ALL=$(sed -n 's/^name = "\(.*\)"/\1/p' Cargo.toml | grep -v '^volgen[-_]fuzz$')
+TARGETS="${TARGETS:-$ALL}"
+echo "building: $(echo $TARGETS)"
+$FUZZ_CMD build
+
+mkdir -p logs
+run_one() {
+  local t="$1"
+  mkdir -p "corpus/$t" "seeds/$t" "artifacts/$t"
+  # New inputs go to corpus/ (not committed); seeds/ holds the committed starting points.
+  $FUZZ_CMD run "$t" "corpus/$t" "seeds/$t" -- \
+    -max_total_time="$SECONDS_EACH" -rss_limit_mb=2048 -timeout=20 -print_final_stats=1 \
+    >"logs/$t.log" 2>&1 || true
+}
+export -f run_one
+export SECONDS_EACH FUZZ_CMD
+printf '%s\n' $TARGETS | xargs -P "$JOBS" -I{} bash -c 'run_one "$1"' _ {}
+
+status=0
+printf '| target | seconds | executions | coverage (edges) | corpus | crashes |\n|---|---|---|---|---|---|\n'
+for t in $TARGETS; do
+  log="logs/$t.log"
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+  corp=$(grep -o 'corp: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+  crashes=$(find "artifacts/$t" -type f \( -name 'crash-*' -o -name 'oom-*' -o -name 'timeout-*' -o -name 'leak-*' \) | wc -l)
+  if grep -q 'ERROR: libFuzzer\|==ERROR: AddressSanitizer\|panicked at' "$log"; then
+    crashes=$((crashes > 0 ? crashes : 1))
+  fi
+  [ "$crashes" -gt 0 ] && status=1
+  printf '| %s | %s | %s | %s | %s | %s |\n' "$t" "$SECONDS_EACH" "${execs:-?}" "${cov:-?}" "${corp:-?}" "$crashes"
+done
+exit $status
