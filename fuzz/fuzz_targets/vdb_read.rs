@@ -7,6 +7,7 @@ use radiance_volume::{Aabb, GridDims, VoxelGrid};
 use volgen_fuzz::{assert_finite, Damage, SmallVolume};
 
 fuzz_target!(|input: (SmallVolume, bool, bool, Damage)| {
+    volgen_fuzz::let_caught_panics_unwind();
     let (volume, half, zlib, damage) = input;
     let Some(volume) = volume.build() else {
         return;

@@ -8,6 +8,7 @@ use libfuzzer_sys::fuzz_target;
 use radiance_volume::{Aabb, Error, GridDims, RadianceVolume};
 
 fuzz_target!(|input: (u8, u8, u8, bool, bool, u8, Vec<f32>)| {
+    volgen_fuzz::let_caught_panics_unwind();
     let (d, h, w, half, zlib, threshold, values) = input;
     // Cap the size first: at most 20^3 voxels.
     let dims = GridDims::new(

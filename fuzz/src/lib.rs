@@ -79,3 +79,14 @@ pub fn assert_finite(volume: &RadianceVolume, what: &str) {
         "{what}: the reader accepted non-finite values"
     );
 }
+
+/// libFuzzer's panic hook aborts on every panic, also on those the code under test catches on
+/// purpose: radiance-volume's VDB reader turns vdb-rs's panics on malformed files into errors
+/// (`catch_unwind`). This hook only prints the message, so caught panics stay errors while an
+/// uncaught one still reaches libfuzzer-sys, which aborts and records the input.
+pub fn let_caught_panics_unwind() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        std::panic::set_hook(Box::new(|info| eprintln!("panic (caught or not): {info}")));
+    });
+}

@@ -145,3 +145,31 @@ fn a_re_export_that_fails_part_way_leaves_no_stack_the_reader_accepts() {
     let err = RadianceVolume::read_exr_slices(dir.path(), "v").unwrap_err();
     assert!(err.to_string().contains("v.json"), "{err}");
 }
+
+/// Found by fuzzing (`fuzz/fuzz_targets/exr_slices_read.rs`): a slice whose header claims a
+/// huge data window made the reader allocate it (6.6 GB) before finding the pixels missing.
+/// The header is now checked against the sidecar first.
+#[test]
+fn a_slice_header_claiming_a_huge_image_is_refused_before_reading_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    volume(GridDims::new(2, 2, 2))
+        .write_exr_slices()
+        .to_dir(dir.path(), "v")
+        .unwrap();
+    let path = dir.path().join("v.0000.exr");
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The dataWindow attribute: name, type, size (16), then xMin, yMin, xMax, yMax as i32.
+    let key = b"dataWindow\0box2i\0";
+    let at = bytes
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("a dataWindow attribute")
+        + key.len()
+        + 4;
+    for (i, value) in [0i32, 0, 60_000, 60_000].iter().enumerate() {
+        bytes[at + 4 * i..at + 4 * i + 4].copy_from_slice(&value.to_le_bytes());
+    }
+    std::fs::write(&path, bytes).unwrap();
+    let err = RadianceVolume::read_exr_slices(dir.path(), "v").unwrap_err();
+    assert!(err.to_string().contains("v.0000.exr"), "{err}");
+}

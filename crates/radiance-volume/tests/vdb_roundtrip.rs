@@ -337,3 +337,34 @@ proptest! {
         prop_assert_eq!(stats.active_voxels, active as u64);
     }
 }
+
+/// Found by fuzzing (`fuzz/fuzz_targets/vdb_read.rs`): one flipped byte in a zlib-compressed
+/// file of ours makes vdb-rs index an empty buffer. The reader reports it as a bad file.
+#[test]
+fn a_damaged_compressed_leaf_is_an_error_not_a_panic() {
+    let (d, h, w) = (7, 2, 6);
+    let n = d * h * w;
+    let data: Vec<f32> = (0..4 * n)
+        .map(|i| {
+            if i < n {
+                3.773_421_5e-21
+            } else {
+                -3.773_421_5e-21
+            }
+        })
+        .collect();
+    let t = Tensor::from_vec(data, (4, d, h, w), &Device::Cpu).unwrap();
+    let volume = RadianceVolume::new(t, Aabb::CUBE).unwrap();
+    let mut bytes = Vec::new();
+    volume
+        .write_vdb()
+        .half(false)
+        .zlib(true)
+        .to_writer(&mut bytes)
+        .unwrap();
+    let at = 738_413_436 % bytes.len();
+    bytes[at] ^= 75;
+    let grid = VoxelGrid::new(Aabb::CUBE, GridDims::cube(8)).unwrap();
+    let err = RadianceVolume::read_vdb_bytes(bytes, &grid, "damaged.vdb".as_ref()).unwrap_err();
+    assert!(err.to_string().contains("damaged.vdb"), "{err}");
+}

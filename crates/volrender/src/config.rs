@@ -47,8 +47,8 @@ pub const MAX_SAMPLES_PER_RAY: usize = 1 << 24;
 
 /// The range the renderer accepts, so that every product in the forward and backward passes
 /// stays finite in f32 (found by fuzzing: a box 1e37 wide rendered finite images whose
-/// gradients overflowed): colours at most this in magnitude (density may be any finite value
-/// >= 0), ...
+/// gradients overflowed): colours, the volume's and the background's, at most this in
+/// magnitude (density may be any finite value >= 0), ...
 pub const MAX_VOLUME_VALUE: f32 = 1e10;
 /// ... box corners and ray origins within this of the origin in every coordinate, ...
 pub const MAX_COORDINATE: f32 = 1e8;
@@ -204,9 +204,16 @@ impl RenderConfig {
         }
         if self
             .background
-            .is_some_and(|b| !b.iter().all(|c| c.is_finite()))
+            .is_some_and(|b| !b.iter().all(|c| c.abs() <= MAX_VOLUME_VALUE))
         {
-            return Err(invalid("background", "background colour must be finite"));
+            return Err(invalid(
+                "background",
+                format!(
+                    "background colour must be finite and at most {MAX_VOLUME_VALUE:e} in \
+                     magnitude, got {:?}",
+                    self.background
+                ),
+            ));
         }
         if self.occupancy_cell == 0 {
             return Err(invalid(

@@ -190,12 +190,12 @@ fn bad_arguments_are_rejected() {
 }
 
 /// Found by fuzzing (`fuzz/fuzz_targets/render.rs`): a box 1e37 wide and a ray 3.5e8 long per
-/// unit of t rendered finite images whose gradient overflowed. Such scales are now refused by
+/// unit of t, and then a background of -1.7e38, rendered finite images whose gradient overflowed. Such scales are now refused by
 /// name, and the largest accepted ones keep outputs and gradients finite.
 #[test]
 fn scales_whose_gradients_would_overflow_are_refused_and_the_largest_accepted_stay_finite() {
     use radiance_volume::Aabb;
-    use volrender::{Rays, MAX_COORDINATE, MIN_DIRECTION_LENGTH};
+    use volrender::{Rays, MAX_COORDINATE, MAX_VOLUME_VALUE, MIN_DIRECTION_LENGTH};
     let huge = Aabb::try_new([0.0, -2.8e10, -1.7e38].into(), [2.1e37; 3].into()).unwrap();
     let cfg = RenderConfig::default().with_aabb(huge);
     let ray = Rays::new(vec![[0.0; 3]], vec![[0.0, 0.0, 1.0]]).unwrap();
@@ -209,6 +209,10 @@ fn scales_whose_gradients_would_overflow_are_refused_and_the_largest_accepted_st
     let bright = (constant_volume((2, 2, 2), 1.0, DType::F32) * 1e20).unwrap();
     let err = render(&bright, &ray, &RenderConfig::default()).unwrap_err();
     assert!(matches!(err, Error::InvalidVolume { .. }), "{err}");
+    // The second find: a background of -1.7e38.
+    let dark = RenderConfig::default().with_background([0.0, -1.7e38, 0.0]);
+    let err = render(&vol, &ray, &dark).unwrap_err().to_string();
+    assert!(err.contains("background"), "{err}");
 
     // The extremes that are accepted: the widest box, a far origin, the shortest direction,
     // the brightest colours, the densest density.
@@ -216,6 +220,7 @@ fn scales_whose_gradients_would_overflow_are_refused_and_the_largest_accepted_st
     let widest = Aabb::try_new([-m; 3].into(), [m; 3].into()).unwrap();
     let cfg = RenderConfig::default()
         .with_aabb(widest)
+        .with_background([MAX_VOLUME_VALUE, -MAX_VOLUME_VALUE, 0.0])
         .with_depth(true)
         .with_opacity(true);
     let rays = Rays::new(

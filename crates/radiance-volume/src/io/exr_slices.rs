@@ -379,12 +379,35 @@ fn read_slice(path: &Path, dims: GridDims, channels: &[SidecarChannel]) -> Resul
         format: FORMAT,
         why,
     };
+    // The header first: a damaged one can claim any size, and the pixel reader would allocate
+    // it before finding the data missing (found by fuzzing: 6.6 GB for a 16-voxel slice).
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| match e {
+        exr::error::Error::Io(source) => Error::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => bad(other.to_string()),
+    })?;
+    for header in &meta.headers {
+        let size = header.layer_size;
+        if size.width() != dims.w || size.height() != dims.h {
+            return Err(bad(format!(
+                "slice is {}x{}, the sidecar says {}x{}",
+                size.width(),
+                size.height(),
+                dims.w,
+                dims.h
+            )));
+        }
+    }
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
+        // Slices are already read in parallel; exr's own pool per file would only add threads.
+        .non_parallel()
         .from_file(path)
         .map_err(|e| match e {
             exr::error::Error::Io(source) => Error::Io {
