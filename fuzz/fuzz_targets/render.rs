@@ -7,6 +7,7 @@ use arbitrary::Arbitrary;
 use candle_core::{Device, Tensor, Var};
 use libfuzzer_sys::fuzz_target;
 use radiance_volume::Aabb;
+use volgen_fuzz::all_finite;
 use volrender::{render, Rays, RenderConfig, Sampler};
 
 #[derive(Arbitrary, Debug)]
@@ -20,11 +21,6 @@ struct Input {
     epsilon: f32,
     skip_empty: bool,
     background: Option<[f32; 3]>,
-}
-
-fn finite(t: &Tensor) -> bool {
-    let values: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
-    values.iter().all(|v| v.is_finite())
 }
 
 fuzz_target!(|input: Input| {
@@ -71,13 +67,13 @@ fuzz_target!(|input: Input| {
     let depth = out.depth.unwrap();
     let opacity = out.opacity.unwrap();
     assert!(
-        finite(&out.rgb) && finite(&depth) && finite(&opacity),
+        all_finite(&out.rgb) && all_finite(&depth) && all_finite(&opacity),
         "non-finite output"
     );
     let loss = (out.rgb.sum_all().unwrap() + depth.sum_all().unwrap() + opacity.sum_all().unwrap())
         .unwrap();
     let grads = loss.backward().unwrap();
     if let Some(grad) = grads.get(volume.as_tensor()) {
-        assert!(finite(grad), "non-finite gradient");
+        assert!(all_finite(grad), "non-finite gradient");
     }
 });

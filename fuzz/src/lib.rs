@@ -71,11 +71,16 @@ impl SmallVolume {
     }
 }
 
+/// Whether every element of an f32 tensor is finite.
+pub fn all_finite(tensor: &Tensor) -> bool {
+    let values: Vec<f32> = tensor.flatten_all().unwrap().to_vec1().unwrap();
+    values.iter().all(|v| v.is_finite())
+}
+
 /// Asserts that a volume a reader accepted holds only finite values.
 pub fn assert_finite(volume: &RadianceVolume, what: &str) {
-    let values: Vec<f32> = volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
     assert!(
-        values.iter().all(|v| v.is_finite()),
+        all_finite(volume.tensor()),
         "{what}: the reader accepted non-finite values"
     );
 }

@@ -705,22 +705,27 @@ mod tests {
                 .collect()
         };
         // L, first volume / rendering, last volume / rendering, final, views per step.
-        assert_eq!(paper.layers, 7);
-        assert_eq!((paper.volume_sizes[0], paper.image_sizes[0]), (40, 32));
-        assert_eq!((paper.volume_sizes[4], paper.image_sizes[4]), (126, 160));
-        assert_eq!(paper.final_image_size(), 320);
-        assert_eq!(
-            views(&paper),
-            [(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)]
-        );
-        assert_eq!(island.layers, 5);
-        assert_eq!((island.volume_sizes[0], island.image_sizes[0]), (40, 25));
-        assert_eq!((island.volume_sizes[4], island.image_sizes[4]), (126, 160));
-        assert_eq!(island.final_image_size(), 320);
-        assert_eq!(
-            views(&island),
-            [(6, 2), (6, 2), (6, 2), (6, 1), (3, 1), (2, 1)]
-        );
+        let rows = [
+            (
+                &paper,
+                7,
+                (40, 32),
+                [(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)],
+            ),
+            (
+                &island,
+                5,
+                (40, 25),
+                [(6, 2), (6, 2), (6, 2), (6, 1), (3, 1), (2, 1)],
+            ),
+        ];
+        for (config, layers, first, per_scale_views) in rows {
+            assert_eq!(config.layers, layers, "{}", config.preset);
+            assert_eq!((config.volume_sizes[0], config.image_sizes[0]), first);
+            assert_eq!((config.volume_sizes[4], config.image_sizes[4]), (126, 160));
+            assert_eq!(config.final_image_size(), 320);
+            assert_eq!(views(config), per_scale_views, "{}", config.preset);
+        }
         // The smaller presets keep their own layers and views.
         let tiny = TrainConfig::preset("tiny").unwrap();
         assert_eq!(tiny.layers, 5);

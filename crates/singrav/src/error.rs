@@ -65,11 +65,11 @@ pub enum Error {
     },
     /// An optimiser was given a gradient with a NaN or infinite element; no variable was
     /// updated. Training reports it as [`Error::Diverged`].
-    #[error("the gradient of {parameter} is not finite (its sum of squares is {value})")]
+    #[error("the gradient of {parameter} is not finite (its sum is {value})")]
     NonFiniteGradient {
         /// The variable's name.
         parameter: String,
-        /// The gradient's sum of squares.
+        /// The sum of the gradient's elements.
         value: f32,
     },
     /// An error from radiance-volume.

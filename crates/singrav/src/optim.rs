@@ -86,15 +86,15 @@ impl Adam {
         Ok(())
     }
 
-    /// Errors unless every gradient in `grads` is finite (checked through its sum of squares,
-    /// which is NaN or infinite if any element is; it may also overflow for huge finite
-    /// gradients, which would wreck the step all the same).
+    /// Errors unless every gradient in `grads` is finite (checked through its sum, which is NaN
+    /// or infinite if any element is; it may also overflow for huge finite gradients, which
+    /// would wreck the step all the same).
     fn check_finite(&self, grads: &GradStore) -> Result<()> {
         for (name, var) in &self.params {
             let Some(grad) = grads.get(var.as_tensor()) else {
                 continue;
             };
-            let value = grad.detach().sqr()?.sum_all()?.to_scalar::<f32>()?;
+            let value = grad.detach().sum_all()?.to_scalar::<f32>()?;
             if !value.is_finite() {
                 return Err(crate::Error::NonFiniteGradient {
                     parameter: name.clone(),

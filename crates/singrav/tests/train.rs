@@ -87,14 +87,18 @@ fn assert_same_tensors(a: &HashMap<String, Tensor>, b: &HashMap<String, Tensor>)
     }
 }
 
-/// The message of a training run that must fail before or during its first step.
-fn train_error(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> String {
+/// The error of a training run that must fail.
+fn train_failure(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> Error {
     train(config, data, run, options, &Device::Cpu, &mut |_| {
         Control::Continue
     })
     .err()
     .expect("training should have failed")
-    .to_string()
+}
+
+/// The message of a training run that must fail before or during its first step.
+fn train_error(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> String {
+    train_failure(config, data, run, options).to_string()
 }
 
 #[test]
@@ -352,11 +356,7 @@ fn a_nan_stops_the_run_at_once_and_resume_continues_from_the_last_good_checkpoin
         poison: Some((2, 2)),
         ..RunOptions::default()
     };
-    let err = train(&config, &data, &run, &poisoned, &Device::Cpu, &mut |_| {
-        Control::Continue
-    })
-    .err()
-    .expect("a NaN generator must stop the run");
+    let err = train_failure(&config, &data, &run, &poisoned);
     let Error::Diverged {
         scale, step, what, ..
     } = &err
@@ -382,11 +382,7 @@ fn a_nan_stops_the_run_at_once_and_resume_continues_from_the_last_good_checkpoin
     assert_eq!(log.lines().count(), config.scale_schedule(1).iterations + 2);
 
     // Resumed (without the poison), the run ends as the uninterrupted one did.
-    let resumed = train(&config, &data, &run, &resume(), &Device::Cpu, &mut |_| {
-        Control::Continue
-    })
-    .unwrap();
-    assert!(matches!(resumed, TrainOutcome::Finished(_)));
+    run_with(&config, &data, &run, &resume());
     assert_same_tensors(
         &checkpoint_tensors(&tmp.path().join("whole")),
         &checkpoint_tensors(&run),

@@ -78,6 +78,27 @@ fn out_of_space(error: &std::io::Error) -> bool {
     )
 }
 
+/// Removes `path` if it exists (a missing file is not an error). Rewriters of a directory of
+/// files use it to take away the index file first (a dataset's transforms.json, an EXR stack's
+/// sidecar) and write it last, so a rewrite killed part-way never leaves an old index over a mix
+/// of old and new files.
+///
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// let path = dir.path().join("index.json");
+/// radiance_volume::io::remove_file_if_exists(&path)?;
+/// std::fs::write(&path, "{}")?;
+/// radiance_volume::io::remove_file_if_exists(&path)?;
+/// assert!(!path.exists());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn remove_file_if_exists(path: &Path) -> Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io_error(path)(e)),
+        _ => Ok(()),
+    }
+}
+
 /// Checks, before any expensive work, that a file can be created in `path`'s directory (the
 /// directory exists and is writable), by creating and removing a temporary file there.
 pub fn check_writable(path: &Path) -> Result<()> {

@@ -33,7 +33,7 @@ use half::f16;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::atomic::{check_writable, write_atomic, write_bytes_atomic};
+use super::atomic::{check_writable, remove_file_if_exists, write_atomic, write_bytes_atomic};
 use crate::error::{beyond_half, invalid, io_error, Error, Result};
 use crate::grid::{Aabb, GridDims};
 use crate::volume::RadianceVolume;
@@ -214,14 +214,8 @@ impl ExrSlicesWriter<'_> {
         let paths: Vec<PathBuf> = (0..dims.d)
             .map(|z| slice_path(dir, name, z, dims.d))
             .collect();
-        // Over an earlier export the old sidecar goes first (the new one comes last), so an
-        // export killed part-way never leaves old metadata over a mix of old and new slices.
-        match std::fs::remove_file(&sidecar_path) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(io_error(&sidecar_path)(e));
-            }
-            _ => {}
-        }
+        // Over an earlier export the old sidecar goes first; the new one comes last.
+        remove_file_if_exists(&sidecar_path)?;
 
         let written = volume.with_values(|values| {
             paths
@@ -416,16 +410,8 @@ fn read_slice(path: &Path, dims: GridDims, channels: &[SidecarChannel]) -> Resul
             },
             other => bad(other.to_string()),
         })?;
+    // Its size was checked with the headers above.
     let layer = image.layer_data;
-    if layer.size.x() != dims.w || layer.size.y() != dims.h {
-        return Err(bad(format!(
-            "slice is {}x{}, the sidecar says {}x{}",
-            layer.size.x(),
-            layer.size.y(),
-            dims.w,
-            dims.h
-        )));
-    }
     channels
         .iter()
         .map(|ch| {

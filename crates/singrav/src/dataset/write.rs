@@ -108,12 +108,7 @@ pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Resul
     // Rewriting a dataset: its transforms.json goes first and comes back last, so a run killed
     // in between leaves a directory the loader refuses, not old cameras over new images.
     let transforms_path = dir.join("transforms.json");
-    match std::fs::remove_file(&transforms_path) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            return Err(crate::error::io_error(&transforms_path)(e));
-        }
-        _ => {}
-    }
+    radiance_volume::io::remove_file_if_exists(&transforms_path)?;
     let volume = scene.to_volume(GridDims::cube(spec.grid))?;
     let fov_x = PAPER_FOV_DEG.to_radians();
     let cameras = Camera::hemisphere(

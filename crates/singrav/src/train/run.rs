@@ -359,7 +359,7 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
 fn diverged(error: Error, n: usize, it: usize) -> Error {
     let what = match error {
         Error::NonFiniteGradient { parameter, value } => {
-            format!("the gradient of {parameter} is not finite (its sum of squares is {value})")
+            format!("the gradient of {parameter} is not finite (its sum is {value})")
         }
         Error::Render(volrender::Error::InvalidVolume { count, first, why }) => {
             format!("a generated volume has {count} invalid values, first at {first} ({why})")
