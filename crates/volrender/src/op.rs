@@ -369,9 +369,14 @@ fn interleave<T: Pooled>(
     let limit = T::of(f64::from(MAX_VOLUME_VALUE));
     // Density may be any finite value >= 0 (the kernel is exact up to f32::MAX); colours are
     // bounded so that their products with segment lengths stay finite in the backward pass.
-    let bad = |v: &[T; 4]| {
-        !(v[0].is_finite() && v[0] >= T::zero() && v[1..].iter().all(|x| x.abs() <= limit))
+    let value_ok = |c: usize, x: T| {
+        if c == 0 {
+            x.is_finite() && x >= T::zero()
+        } else {
+            x.abs() <= limit
+        }
     };
+    let bad = |v: &[T; 4]| !(0..4).all(|c| value_ok(c, v[c]));
     (0..n)
         .map(|b| {
             let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
@@ -396,8 +401,7 @@ fn interleave<T: Pooled>(
             if count > 0 {
                 // (The buffer is not given back: errors are not the path to optimise.)
                 let i = data.iter().position(bad).unwrap_or(0);
-                let colour_ok = |x: T| x.abs() <= limit;
-                let c = (1..4).find(|&c| !colour_ok(data[i][c])).unwrap_or(0);
+                let c = (0..4).find(|&c| !value_ok(c, data[i][c])).unwrap_or(0);
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
                 return Err(Error::InvalidVolume {
                     count,
