@@ -368,3 +368,54 @@ fn a_damaged_compressed_leaf_is_an_error_not_a_panic() {
     let err = RadianceVolume::read_vdb_bytes(bytes, &grid, "damaged.vdb".as_ref()).unwrap_err();
     assert!(err.to_string().contains("damaged.vdb"), "{err}");
 }
+
+/// Found by fuzzing (`vdb_read`): a flipped byte in a compressed array's byte count made vdb-rs
+/// allocate the claimed count before reading it, which aborts the process rather than failing.
+/// The reader's pre-scan now walks every compressed tree and refuses counts beyond the file's
+/// end. Here: the fuzzer's input (a 1 x 8 x 1 volume, full floats, zlib, byte 29185 % len XOR
+/// 47), then single-byte flips of small files in all four encodings (every byte of the header,
+/// descriptors and metadata, and every 23rd byte of the trees; docs/reliability.md reports the
+/// one-off run over every byte): each read returns a volume of finite values or a bad-file error
+/// naming the file. The sweep found two more ways to make vdb-rs allocate without bound: a
+/// flipped `is_saved_as_half_float` and a flipped leaf-buffer offset.
+#[test]
+fn every_single_byte_flip_is_read_or_refused_without_unbounded_allocation() {
+    let grid = VoxelGrid::new(Aabb::CUBE, GridDims::cube(8)).unwrap();
+    let path = std::path::Path::new("flipped.vdb");
+    let read = |bytes: Vec<u8>, what: &str| match RadianceVolume::read_vdb_bytes(bytes, &grid, path)
+    {
+        Ok(v) => assert!(
+            values(&v).iter().all(|x| x.is_finite()),
+            "{what}: non-finite"
+        ),
+        Err(Error::InvalidFile { path, .. }) => {
+            assert_eq!(path, std::path::Path::new("flipped.vdb"))
+        }
+        Err(e) => panic!("{what}: {e:?}"),
+    };
+
+    let (d, h, w) = (1, 8, 1);
+    let n = d * h * w;
+    let data: Vec<f32> = (0..4 * n).map(|i| if i < n { 1e4 } else { -1e4 }).collect();
+    let t = Tensor::from_vec(data, (4, d, h, w), &Device::Cpu).unwrap();
+    let mut bytes = write(&RadianceVolume::new(t, Aabb::CUBE).unwrap(), false, true);
+    let at = 29185 % bytes.len();
+    bytes[at] ^= 47;
+    read(bytes, "the fuzzer's input");
+
+    let v = sparse_volume(GridDims::new(3, 9, 5), Aabb::CUBE);
+    for (half, zlib) in [(false, false), (false, true), (true, false), (true, true)] {
+        let bytes = write(&v, half, zlib);
+        let header = 600;
+        let flips = (0..header).flat_map(|at| [(at, 0x01), (at, 0x2f), (at, 0x80)]);
+        let flips = flips.chain((header..bytes.len()).step_by(23).map(|at| (at, 0x2f)));
+        for (at, mask) in flips {
+            let mut damaged = bytes.clone();
+            damaged[at] ^= mask;
+            read(
+                damaged,
+                &format!("half {half}, zlib {zlib}, byte {at} ^ {mask:#x}"),
+            );
+        }
+    }
+}

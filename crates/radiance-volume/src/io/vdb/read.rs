@@ -13,7 +13,14 @@
 //!   them) it expects an 8-byte size where OpenVDB writes nothing (an empty value array), and
 //!   reads vec3 inactive values as halves where OpenVDB stores floats. Such a tree is walked here
 //!   ([`TreeWalk`]) and the view gets the missing (zero) sizes inserted and the extra bytes hidden.
-//!   Without this, vdb-rs reads garbage sizes and can abort the process on a huge allocation.
+//!   Without this, vdb-rs reads garbage sizes and can abort the process on a huge allocation;
+//! - it allocates whatever byte count a compressed array claims before reading it, so a damaged
+//!   count aborts the process (an allocation failure is not a panic `catch_unwind` could turn
+//!   into an error). Every zip or Blosc tree is therefore walked first and refused if an array
+//!   claims more bytes than the file has left, a Blosc header more values than the node holds,
+//!   the leaf buffers do not start where the topology ends (vdb-rs reads on, OpenVDB seeks), or
+//!   the `_HalfFloat` type and the `is_saved_as_half_float` metadata (which vdb-rs goes by)
+//!   disagree.
 
 use std::collections::HashMap;
 use std::io::{Read, Seek, SeekFrom};
@@ -370,7 +377,7 @@ fn scan(bytes: &[u8]) -> std::result::Result<Vec<GridLayout>, String> {
                 "{what}: unknown compression flags {compression:#x}"
             ));
         }
-        skip_metadata(&mut c, &what)?;
+        let saved_as_half = skip_metadata(&mut c, &what)?;
         let (tree_type, half) = match grid_type.strip_suffix("_HalfFloat") {
             Some(t) => (t.to_string(), true),
             None => (grid_type.clone(), false),
@@ -383,7 +390,13 @@ fn scan(bytes: &[u8]) -> std::result::Result<Vec<GridLayout>, String> {
             holes: Vec::new(),
             inserts: Vec::new(),
         };
-        if !parent.is_empty() {
+        if saved_as_half != half {
+            // vdb-rs picks the value width from the metadata, the tree walk below from the type.
+            layout.unreadable = Some(format!(
+                "the type `{grid_type}` and the metadata `is_saved_as_half_float` = \
+                 {saved_as_half} disagree on the value precision"
+            ));
+        } else if !parent.is_empty() {
             layout.unreadable = Some(format!(
                 "an instance of grid `{parent}`, not supported by vdb-rs"
             ));
@@ -428,11 +441,13 @@ fn scan(bytes: &[u8]) -> std::result::Result<Vec<GridLayout>, String> {
                     layout.tree_type.as_str(),
                     "Tree_float_5_4_3" | "Tree_vec3s_5_4_3"
                 );
-                if known && layout.half && compression & (COMPRESS_ZIP | COMPRESS_BLOSC) != 0 {
+                if known && compression & (COMPRESS_ZIP | COMPRESS_BLOSC) != 0 {
                     let mut walk = TreeWalk {
                         c: &mut c,
                         what: &what,
                         value_size,
+                        half: layout.half,
+                        blosc: compression & COMPRESS_BLOSC != 0,
                         mask_compressed: compression & COMPRESS_ACTIVE_MASK != 0,
                         holes: Vec::new(),
                         inserts: Vec::new(),
@@ -457,7 +472,9 @@ fn scan(bytes: &[u8]) -> std::result::Result<Vec<GridLayout>, String> {
 }
 
 /// Skips a metadata map, checking that each value has the size vdb-rs assumes for its type.
-fn skip_metadata(c: &mut Cursor<'_>, what: &str) -> std::result::Result<(), String> {
+/// Returns whether it says `is_saved_as_half_float` (which vdb-rs reads values by).
+fn skip_metadata(c: &mut Cursor<'_>, what: &str) -> std::result::Result<bool, String> {
+    let mut saved_as_half = false;
     let count = c.u32(what)?;
     for _ in 0..count {
         let name = c.string(what)?;
@@ -475,18 +492,25 @@ fn skip_metadata(c: &mut Cursor<'_>, what: &str) -> std::result::Result<(), Stri
                 "{what}: metadata `{name}` of type {type_name} has size {size}"
             ));
         }
-        c.take(size, what)?;
+        let value = c.take(size, what)?;
+        if name == "is_saved_as_half_float" && type_name == "bool" {
+            saved_as_half = value != [0];
+        }
     }
-    Ok(())
+    Ok(saved_as_half)
 }
 
-/// Walks the tree of a half-float grid stored with zip or Blosc (see the module docs), recording
-/// where the view handed to vdb-rs must differ from the file.
+/// Walks the tree of a grid stored with zip or Blosc, checking that every compressed array's
+/// byte count fits in the file (vdb-rs allocates the count it reads before reading the bytes, so
+/// a damaged count would abort the process) and, for half-float grids (see the module docs),
+/// recording where the view handed to vdb-rs must differ from the file.
 struct TreeWalk<'c, 'a> {
     c: &'c mut Cursor<'a>,
     what: &'c str,
     /// Bytes of one full-precision value (inactive values are stored at full precision).
     value_size: usize,
+    half: bool,
+    blosc: bool,
     mask_compressed: bool,
     holes: Vec<Range<u64>>,
     inserts: Vec<u64>,
@@ -499,13 +523,22 @@ fn count_ones(mask: &[u8]) -> usize {
 }
 
 impl TreeWalk<'_, '_> {
-    /// Walks the topology from the root's child list, then the leaf buffers at `block_pos`.
+    /// Walks the topology from the root's child list, then the leaf buffers, which must start at
+    /// `block_pos`.
     fn tree(&mut self, children: u32, block_pos: u64) -> std::result::Result<(), String> {
         for _ in 0..children {
             self.c.take(12, self.what)?;
             self.node(5)?;
         }
-        self.c.seek(block_pos, self.what)?;
+        // OpenVDB records the buffers' offset right after writing the topology, and vdb-rs reads
+        // on from there whatever the offset says: a file where the two differ is damaged.
+        if self.c.pos() as u64 != block_pos {
+            return Err(format!(
+                "{}: the leaf buffers' offset {block_pos} is not where the topology ends ({})",
+                self.what,
+                self.c.pos()
+            ));
+        }
         for _ in 0..self.leaves {
             let mask = self.c.take(64, self.what)?;
             self.array(count_ones(mask), 512)?;
@@ -546,7 +579,7 @@ impl TreeWalk<'_, '_> {
         for _ in 0..inactive_values {
             let at = self.c.pos() as u64;
             self.c.take(self.value_size, self.what)?;
-            if self.value_size == 12 {
+            if self.half && self.value_size == 12 {
                 // vdb-rs reads a vec3 half grid's inactive value as three halves.
                 self.holes.push(at + 6..at + 12);
             }
@@ -559,7 +592,7 @@ impl TreeWalk<'_, '_> {
         } else {
             slots
         };
-        if count == 0 {
+        if self.half && count == 0 {
             // OpenVDB's HalfWriter writes nothing here; vdb-rs reads a size.
             self.inserts.push(self.c.pos() as u64);
             return Ok(());
@@ -567,7 +600,26 @@ impl TreeWalk<'_, '_> {
         let size = i64::from_le_bytes(self.c.take(8, self.what)?.try_into().expect("took 8 bytes"));
         let len = usize::try_from(size.unsigned_abs())
             .map_err(|_| format!("{}: array size {size} is too large", self.what))?;
-        self.c.take(len, self.what)?;
+        // `take` refuses a count beyond the file's end, before vdb-rs would allocate it.
+        let data = self.c.take(len, self.what)?;
+        if self.blosc && size > 0 {
+            // vdb-rs also allocates the decompressed size a Blosc header claims (bytes 4..8).
+            let stored = count
+                * if self.half {
+                    self.value_size / 2
+                } else {
+                    self.value_size
+                };
+            let claimed = data
+                .get(4..8)
+                .map(|b| u32::from_le_bytes(b.try_into().expect("took 4 bytes")) as usize);
+            if claimed.is_none_or(|claimed| claimed > stored) {
+                return Err(format!(
+                    "{}: a Blosc block claims {claimed:?} bytes for {count} values of {stored} bytes",
+                    self.what
+                ));
+            }
+        }
         Ok(())
     }
 }
