@@ -89,7 +89,9 @@ fn depth_exr(width: usize, height: usize, values: &[f32], channel: &str) -> Vec<
         channels,
     ));
     let mut out = Cursor::new(Vec::new());
-    image.write().to_buffered(&mut out).unwrap();
+    // Without a thread pool: a pool thread's reused compression buffer (thread-local) reads
+    // as a leak to LeakSanitizer (found 2026-11-25; volgen's own EXR code is non-parallel too).
+    image.write().non_parallel().to_buffered(&mut out).unwrap();
     out.into_inner()
 }
 
