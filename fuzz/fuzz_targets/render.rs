@@ -57,7 +57,9 @@ fuzz_target!(|input: Input| {
         // minutes under the sanitizer (a 20 s timeout, found 2026-11-25), and nothing to learn.
         let size = [0, 1, 2].map(|k| f64::from(input.aabb.1[k]) - f64::from(input.aabb.0[k]));
         let cells = [w, h, d].map(|n| n as f64);
-        let voxel = (0..3).map(|k| size[k] / cells[k]).fold(f64::INFINITY, f64::min);
+        let voxel = (0..3)
+            .map(|k| size[k] / cells[k])
+            .fold(f64::INFINITY, f64::min);
         let diagonal = size.iter().map(|s| s * s).sum::<f64>().sqrt();
         if diagonal / voxel * per_voxel as f64 > 65536.0 {
             return;
