@@ -41,6 +41,8 @@ run_one() {
   mkdir -p "corpus/$t" "seeds/$t" "artifacts/$t"
   # New inputs go to corpus/ (not committed); seeds/ holds the committed starting points.
   local started=$SECONDS
+  # Only inputs recorded from now on count as this run's crashes (older ones stay as evidence).
+  touch "logs/$t.started"
   $FUZZ_CMD run "$t" "corpus/$t" "seeds/$t" -- \
     -max_total_time="$SECONDS_EACH" -rss_limit_mb=2048 -timeout=20 -print_final_stats=1 \
     >"logs/$t.log" 2>&1 || true
@@ -58,7 +60,7 @@ for t in $TARGETS; do
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   corp=$(grep -o 'corp: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
-  crashes=$(find "artifacts/$t" -type f \( -name 'crash-*' -o -name 'oom-*' -o -name 'timeout-*' -o -name 'leak-*' \) | wc -l)
+  crashes=$(find "artifacts/$t" -type f -newer "logs/$t.started" \( -name 'crash-*' -o -name 'oom-*' -o -name 'timeout-*' -o -name 'leak-*' \) | wc -l)
   # (Panics the code catches on purpose are printed too; only libFuzzer's summary counts.)
   if grep -q 'ERROR: libFuzzer\|==ERROR: AddressSanitizer\|^SUMMARY: ' "$log"; then
     crashes=$((crashes > 0 ? crashes : 1))
