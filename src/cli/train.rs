@@ -61,10 +61,14 @@ pub struct TrainOptions {
     /// Ablation: train without depth supervision.
     #[arg(long)]
     pub no_depth: bool,
-    /// Ablation: train without opacity supervision (the opacity reconstruction term and the
-    /// critics' opacity channel), as the paper.
+    /// Ablation: train without opacity supervision (the opacity reconstruction term, the
+    /// critics' opacity channel and the samples' height profile), as the paper.
     #[arg(long)]
     pub no_opacity: bool,
+    /// The paper's dense finer scales: every voxel may change at every 3D scale (turns off the
+    /// preset's active set, `sparse_from_scale`; see docs/training.md).
+    #[arg(long)]
+    pub dense: bool,
     /// Weight of the colour-distribution loss of generated scenes at the 3D scales (sliced W2
     /// between the pixel colours of a sample's rendering and the real view's; default: the
     /// preset's).
@@ -134,6 +138,9 @@ impl TrainOptions {
         if let Some(views) = self.reconstruction_views {
             config = config.with_reconstruction_views(views);
         }
+        if self.dense {
+            config.sparse_from_scale = None;
+        }
         if let Some(weight) = self.lambda_colour {
             config.lambda_colour = weight;
         }
@@ -146,6 +153,7 @@ impl TrainOptions {
         if self.no_opacity {
             config.lambda_opacity = 0.0;
             config.critic_opacity = false;
+            config.lambda_height_profile = 0.0;
         }
         config.seed = self.seed;
         if self.fitted.is_some() || self.fit {
@@ -400,6 +408,7 @@ fn format_losses(l: &StepLosses) -> String {
         ("fit", l.fitted),
         ("opacity", l.opacity),
         ("colour", l.colour_distribution),
+        ("height", l.height_profile),
     ];
     for (name, value) in optional {
         if let Some(v) = value {

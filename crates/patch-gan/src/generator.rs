@@ -160,6 +160,36 @@ impl Generator3d {
     /// `V_n = up(V_{n-1}) + G_n(z_n + up(V_{n-1}))`. Needs `in_channels == out_channels` and `z`,
     /// `prev_up` of the same shape.
     pub fn forward_residual(&self, z: &Tensor, prev_up: &Tensor, train: bool) -> Result<Tensor> {
+        self.forward_residual_masked(z, prev_up, None, train)
+    }
+
+    /// [`Generator3d::forward_residual`] with the residual applied only where `mask` is 1:
+    /// `prev_up + mask * G(z + prev_up)`, `mask` of shape `(B, 1, D, H, W)` (broadcast over the
+    /// channels; 0 and 1, or any weights). The generator still convolves every voxel: this is
+    /// the active-set model's math, computed densely; where the mask is 0 the volume stays
+    /// `prev_up` and no gradient reaches the generator from there.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use candle_nn::{VarBuilder, VarMap};
+    /// use patch_gan::{Generator3d, Generator3dConfig};
+    /// let varmap = VarMap::new();
+    /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    /// let g2 = Generator3d::new(&Generator3dConfig::for_scale(2, 5), vb.pp("g2"))?;
+    /// let z = Tensor::ones((1, 4, 6, 6, 6), DType::F32, &Device::Cpu)?;
+    /// let prev_up = Tensor::zeros((1, 4, 6, 6, 6), DType::F32, &Device::Cpu)?;
+    /// let nothing_active = Tensor::zeros((1, 1, 6, 6, 6), DType::F32, &Device::Cpu)?;
+    /// let v = g2.forward_residual_masked(&z, &prev_up, Some(&nothing_active), true)?;
+    /// assert_eq!(v.abs()?.sum_all()?.to_scalar::<f32>()?, 0.0);
+    /// # Ok::<(), patch_gan::Error>(())
+    /// ```
+    pub fn forward_residual_masked(
+        &self,
+        z: &Tensor,
+        prev_up: &Tensor,
+        mask: Option<&Tensor>,
+        train: bool,
+    ) -> Result<Tensor> {
         if self.config.in_channels != self.config.out_channels {
             return Err(invalid(
                 "Generator3d residual",
@@ -179,7 +209,25 @@ impl Generator3d {
                 ),
             ));
         }
-        Ok((prev_up + self.forward_t(&(z + prev_up)?, train)?)?)
+        if let Some(mask) = mask {
+            let (batch, _, d, h, w) = prev_up.dims5()?;
+            if mask.dims() != [batch, 1, d, h, w] {
+                return Err(invalid(
+                    "Generator3d residual",
+                    format!(
+                        "mask {:?} is not one channel of the volume {:?}",
+                        mask.shape(),
+                        prev_up.shape()
+                    ),
+                ));
+            }
+        }
+        let residual = self.forward_t(&(z + prev_up)?, train)?;
+        let residual = match mask {
+            None => residual,
+            Some(mask) => residual.broadcast_mul(mask)?,
+        };
+        Ok((prev_up + residual)?)
     }
 }
 

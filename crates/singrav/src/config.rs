@@ -92,6 +92,25 @@ pub struct TrainConfig {
     /// view from the same camera. 0 (runs made before it existed) leaves it out.
     #[serde(default)]
     pub lambda_colour: f64,
+    /// The first 3D scale (2 or more, counted from 1) whose generator changes the volume only in
+    /// the active set: near matter of the upsampled coarser volume (see [`crate::active_set`]).
+    /// `None` (the paper's model, `--dense`, and runs made before it existed): every voxel.
+    #[serde(default)]
+    pub sparse_from_scale: Option<usize>,
+    /// Density `sigma` (1/world-length, as [`TrainConfig::density_scale`]'s) above which a voxel
+    /// of the upsampled coarser volume is matter, for the active set.
+    #[serde(default)]
+    pub sparse_threshold: f32,
+    /// Voxels around matter that the active set adds (a cube of this half-width).
+    #[serde(default)]
+    pub sparse_margin: usize,
+    /// Weight of the height-profile loss of generated scenes at the 3D scales: the squared
+    /// difference between the mean opacity of each pixel row of a sample's rendering and of the
+    /// real view's alpha from the same camera (matter may move sideways, not up into the sky).
+    /// Needs opacity in the critics' views (`critic_opacity`). 0 (runs made before it existed)
+    /// leaves it out.
+    #[serde(default)]
+    pub lambda_height_profile: f64,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -218,11 +237,28 @@ fn table_views(table: &[(usize, usize)]) -> Vec<ScaleViews> {
 /// 2): cheap next to the generator pass, and V*'s gradient less noisy.
 const TINY_RECONSTRUCTION_VIEWS: usize = 8;
 
+/// `tiny`'s reconstruction weights (colour, depth, opacity) are the other presets' times this:
+/// against the adversarial and colour-distribution terms, the reconstruction V* gained 2.2 dB
+/// PSNR over three seeds (docs/training.md, "Why V* stays below a direct fit").
+const TINY_RECONSTRUCTION_WEIGHT: f64 = 5.0;
+
+/// Weight of `tiny`'s height-profile loss of samples (see
+/// [`TrainConfig::lambda_height_profile`]); it took the matter in the sky that the heavier
+/// reconstruction weights let in back out (docs/training.md).
+const TINY_HEIGHT_PROFILE: f64 = 50.0;
+
 /// Weight of the colour-distribution loss in every preset (see [`TrainConfig::lambda_colour`]).
 const LAMBDA_COLOUR: f64 = 20.0;
 
 /// Weight of the opacity reconstruction in every preset (see [`TrainConfig::lambda_opacity`]).
 const LAMBDA_OPACITY: f64 = 10.0;
+
+/// Density above which the upsampled coarser volume is matter, for the active set: a voxel of
+/// this density at 28^3 in the model's `[-1, 1]^3` cube stops 0.7% of the light crossing it.
+const SPARSE_THRESHOLD: f32 = 0.1;
+
+/// Voxels of margin the active set adds around matter.
+const SPARSE_MARGIN: usize = 2;
 
 /// The volume grows by 4/3 per scale.
 const VOLUME_GROWTH: f64 = 4.0 / 3.0;
@@ -263,8 +299,9 @@ impl TrainConfig {
     ///   generated views.
     /// - `small`: N = 5, volumes 24..57, renderings 32..108, 16 channels; an hour-scale CPU run.
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
-    ///   rate 1e-3 (fewer iterations than the paper, so larger steps); about ten minutes on
-    ///   2 CPU cores.
+    ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
+    ///   5x the paper's and the samples' height profile (both measured in docs/training.md);
+    ///   about ten minutes on 2 CPU cores.
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds).
     pub fn preset(name: &str) -> Result<Self> {
         let paper = Self {
@@ -290,6 +327,10 @@ impl TrainConfig {
             lambda_opacity: LAMBDA_OPACITY,
             critic_opacity: true,
             lambda_colour: LAMBDA_COLOUR,
+            lambda_height_profile: 0.0,
+            sparse_from_scale: None,
+            sparse_threshold: SPARSE_THRESHOLD,
+            sparse_margin: SPARSE_MARGIN,
             noise_amp_factor: 0.1,
             noise_amp_first: 1.0,
             density_scale: 25.0,
@@ -338,6 +379,10 @@ impl TrainConfig {
                 views_per_step: 2,
                 learning_rate: 1e-3,
                 checkpoint_seconds: 60,
+                lambda_color: paper.lambda_color * TINY_RECONSTRUCTION_WEIGHT,
+                lambda_depth: paper.lambda_depth * TINY_RECONSTRUCTION_WEIGHT,
+                lambda_opacity: paper.lambda_opacity * TINY_RECONSTRUCTION_WEIGHT,
+                lambda_height_profile: TINY_HEIGHT_PROFILE,
                 ..scaled("tiny", 4, 16, 24)
             }
             .with_reconstruction_views(TINY_RECONSTRUCTION_VIEWS)),
@@ -504,6 +549,45 @@ impl TrainConfig {
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;
         }
+        if self.lambda_height_profile != 0.0 {
+            if !(self.lambda_height_profile > 0.0 && self.lambda_height_profile.is_finite()) {
+                return Err(invalid(
+                    "lambda_height_profile",
+                    format!(
+                        "expected a finite weight >= 0, got {}",
+                        self.lambda_height_profile
+                    ),
+                ));
+            }
+            if !self.critic_opacity {
+                return Err(invalid(
+                    "lambda_height_profile",
+                    "compares the samples' rendered opacity, which the critics' views hold only \
+                     with critic_opacity on (--no-opacity turns it off); set \
+                     lambda_height_profile=0 or critic_opacity=true",
+                ));
+            }
+        }
+        if let Some(from) = self.sparse_from_scale {
+            if from < 2 {
+                return Err(invalid(
+                    "sparse_from_scale",
+                    format!(
+                        "expected a 3D scale >= 2 (the coarsest, 1, has no coarser volume to \
+                         take the active set from), got {from}"
+                    ),
+                ));
+            }
+            if !(self.sparse_threshold.is_finite() && self.sparse_threshold > 0.0) {
+                return Err(invalid(
+                    "sparse_threshold",
+                    format!(
+                        "expected a finite density > 0, got {}",
+                        self.sparse_threshold
+                    ),
+                ));
+            }
+        }
         let n = self.volume_sizes.len();
         if n == 0 {
             return Err(invalid("volume_sizes", "need at least one 3D scale"));
@@ -651,6 +735,10 @@ mod tests {
             "critic_opacity",
             "lambda_colour",
             "scale_views",
+            "lambda_height_profile",
+            "sparse_from_scale",
+            "sparse_threshold",
+            "sparse_margin",
         ] {
             fields.remove(field);
         }
@@ -659,8 +747,47 @@ mod tests {
         assert!(!old.critic_opacity);
         assert_eq!(old.lambda_colour, 0.0);
         assert_eq!(old.scale_views, None);
+        assert_eq!(old.lambda_height_profile, 0.0);
+        assert_eq!(old.sparse_from_scale, None);
         assert_eq!(old.views(1), ScaleViews::same(old.views_per_step));
         old.validate().unwrap();
+    }
+
+    #[test]
+    fn active_set_and_height_profile_settings_out_of_range_are_refused_by_name() {
+        let micro = TrainConfig::preset("micro").unwrap();
+        let refused = |setting: &str, value: &str| {
+            let err = micro
+                .clone()
+                .with_setting(setting, value)
+                .and_then(|c| c.validate())
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(setting), "{setting}={value}: {err}");
+        };
+        refused("sparse_from_scale", "1");
+        refused("sparse_from_scale", "0");
+        let sparse = micro
+            .clone()
+            .with_setting("sparse_from_scale", "2")
+            .unwrap();
+        sparse.validate().unwrap();
+        for bad in ["0", "-0.1"] {
+            let err = sparse
+                .clone()
+                .with_setting("sparse_threshold", bad)
+                .unwrap()
+                .validate()
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("sparse_threshold"), "{err}");
+        }
+        refused("lambda_height_profile", "-1");
+        let mut blind = micro.clone();
+        blind.critic_opacity = false;
+        blind.lambda_height_profile = 1.0;
+        let err = blind.validate().unwrap_err().to_string();
+        assert!(err.contains("critic_opacity"), "{err}");
     }
 
     #[test]

@@ -32,6 +32,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod active_set;
 pub mod applications;
 pub mod checkpoint;
 pub mod config;

@@ -9,6 +9,7 @@ use candle_nn::{Module, VarBuilder, VarMap};
 use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
 use radiance_volume::{resample_tensor, GridDims};
 
+use crate::active_set::active_mask;
 use crate::config::TrainConfig;
 use crate::error::{invalid, Result};
 use crate::noise::gaussian_volume;
@@ -317,7 +318,9 @@ impl SinGrav {
         Ok(generator.forward_t(&input, true)?)
     }
 
-    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1.
+    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1;
+    /// from the configuration's `sparse_from_scale` on, the residual only in the active set of
+    /// `up(prev)` (see [`crate::active_set`]).
     pub fn refine(&self, n: usize, z: &Tensor, prev: &Tensor) -> Result<Tensor> {
         let (generator, _) = self
             .generators
@@ -325,7 +328,16 @@ impl SinGrav {
             .filter(|_| n >= 2)
             .ok_or_else(|| invalid("scale", format!("3D scale {n} is not built")))?;
         let up = self.upsample_to_scale(prev, n)?;
-        Ok(generator.forward_residual(z, &up, true)?)
+        let mask = match self.config.sparse_from_scale {
+            Some(from) if n >= from => Some(active_mask(
+                &up,
+                &self.config.activation(),
+                self.config.sparse_threshold,
+                self.config.sparse_margin,
+            )?),
+            _ => None,
+        };
+        Ok(generator.forward_residual_masked(z, &up, mask.as_ref(), true)?)
     }
 
     /// Resamples a raw volume to the size of 3D scale `n` (trilinear, differentiable).

@@ -105,7 +105,10 @@ fn train_error(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOp
 fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = micro();
+    // Every optional term and the active set on, so that each runs once.
+    let mut config = micro();
+    config.lambda_height_profile = 1.0;
+    config.sparse_from_scale = Some(2);
     let run = tmp.path().join("run");
     let (model, steps) = run_to_end(&config, &data, &run);
     assert_eq!(steps.len(), config.total_iterations());
@@ -119,6 +122,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             l.swd,
             l.opacity,
             l.colour_distribution,
+            l.height_profile,
         ];
         assert!(
             terms.iter().flatten().all(|v| v.is_finite()),
@@ -134,6 +138,11 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
         let compared =
             *scale < config.scales() && l.adversarial.is_some() && config.lambda_colour > 0.0;
         assert_eq!(l.colour_distribution.is_some(), compared, "scale {scale}");
+        assert_eq!(
+            l.height_profile.is_some(),
+            *scale < config.scales() && l.adversarial.is_some(),
+            "scale {scale}"
+        );
     }
     // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
     assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));
@@ -592,6 +601,82 @@ fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
         .flatten_all()
         .unwrap();
     assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+}
+
+#[test]
+fn active_set_scales_change_the_volume_only_near_matter() {
+    let mut config = micro();
+    config.sparse_from_scale = Some(2);
+    config.sparse_threshold = 0.1;
+    config.sparse_margin = 1;
+    let device = Device::Cpu;
+    let mut rng = singrav::noise::step_rng(0, 0, 0);
+    let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
+    model.push_generator(1.0, &mut rng).unwrap();
+    let vars = model.push_generator(0.1, &mut rng).unwrap();
+    // A generator that changes every voxel (new ones start as the identity).
+    for var in vars.all_vars() {
+        let noise = Tensor::randn(0f32, 0.5, var.as_tensor().shape(), &device).unwrap();
+        var.set(&noise).unwrap();
+    }
+    // Matter in one slab of the coarser volume (raw density 10: sigma ~ 25 * 6), air elsewhere.
+    let coarse_size = config.volume_sizes[0];
+    let slab = coarse_size / 2;
+    let raw: Vec<f32> = (0..4 * coarse_size.pow(3))
+        .map(|i| {
+            let (channel, z) = (
+                i / coarse_size.pow(3),
+                (i / coarse_size.pow(2)) % coarse_size,
+            );
+            match (channel, z) {
+                (0, z) if z == slab => 10.0,
+                (0, _) => -30.0,
+                _ => 0.0,
+            }
+        })
+        .collect();
+    let coarse =
+        Tensor::from_vec(raw, (1, 4, coarse_size, coarse_size, coarse_size), &device).unwrap();
+    let size = config.volume_sizes[1];
+    let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
+    let values = |t: Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
+    let refined = values(model.refine(2, &z, &coarse).unwrap());
+    let up = model.upsample_to_scale(&coarse, 2).unwrap();
+    let mask = values(singrav::active_set::active_mask(&up, &config.activation(), 0.1, 1).unwrap());
+    let up = values(up);
+    let voxels = size.pow(3);
+    let active = mask.iter().filter(|&&m| m == 1.0).count();
+    assert!(active > 0 && active < voxels, "{active} of {voxels} active");
+    for (i, (&r, &u)) in refined.iter().zip(&up).enumerate() {
+        if mask[i % voxels] == 0.0 {
+            assert_eq!(r, u, "inactive voxel {i} changed");
+        }
+    }
+    let changed = (0..refined.len()).filter(|&i| refined[i] != up[i]).count();
+    assert!(
+        changed >= active,
+        "{changed} values changed, {active} voxels active"
+    );
+    // The paper's dense model, same weights, changes the inactive voxels too.
+    config.sparse_from_scale = None;
+    let dense = SinGrav::from_tensors(
+        &config,
+        &model.tensors(),
+        model.noise_amps(),
+        false,
+        &device,
+    )
+    .unwrap();
+    let dense = values(dense.refine(2, &z, &coarse).unwrap());
+    let changed_outside = (0..dense.len())
+        .filter(|&i| mask[i % voxels] == 0.0 && dense[i] != up[i])
+        .count();
+    assert!(changed_outside > 0);
+    for i in 0..dense.len() {
+        if mask[i % voxels] == 1.0 {
+            assert_eq!(dense[i], refined[i], "active voxel {i}");
+        }
+    }
 }
 
 /// Random VGG-19 weights with torchvision's names for the convolutions Heitz et al.'s layers

@@ -7,6 +7,7 @@ mod colour;
 mod critic;
 mod final_scale;
 mod fitted;
+mod height_profile;
 mod log;
 mod run;
 mod texture;
@@ -96,6 +97,9 @@ pub struct StepLosses {
     /// Weighted colour-distribution loss of the generated scenes (3D scales' adversarial
     /// iterations of runs with `lambda_colour > 0`).
     pub colour_distribution: Option<f32>,
+    /// Weighted height-profile loss of the generated scenes (3D scales' adversarial iterations
+    /// of runs with `lambda_height_profile > 0`).
+    pub height_profile: Option<f32>,
 }
 
 /// What just happened, for progress display.

@@ -341,6 +341,7 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("fitted-volume comparison", losses.fitted),
         ("opacity reconstruction", losses.opacity),
         ("colour distribution", losses.colour_distribution),
+        ("height profile", losses.height_profile),
     ];
     for (what, value) in terms {
         if let Some(value) = value.filter(|v| !v.is_finite()) {

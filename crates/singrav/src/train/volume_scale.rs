@@ -11,6 +11,7 @@ use rand::Rng;
 use super::colour::colour_distribution_loss;
 use super::critic::Critic;
 use super::fitted::FittedTarget;
+use super::height_profile::height_profile_loss;
 use super::run::Stage;
 use super::StepLosses;
 use crate::config::TrainConfig;
@@ -194,6 +195,7 @@ impl Stage for VolumeScale<'_> {
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
+        let mut height_sum = 0.0;
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
@@ -212,6 +214,14 @@ impl Stage for VolumeScale<'_> {
                     let loss = (colour_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
                         * self.config.lambda_colour)?;
                     colour_sum_generated += loss.to_scalar::<f32>()?;
+                    total = (total + loss)?;
+                }
+                if self.config.lambda_height_profile > 0.0 {
+                    let channels = fake.dim(1)?;
+                    let alpha = select(&self.level.opacity, &fake_views)?;
+                    let loss = (height_profile_loss(&fake.narrow(1, channels - 1, 1)?, &alpha)?
+                        * self.config.lambda_height_profile)?;
+                    height_sum += loss.to_scalar::<f32>()?;
                     total = (total + loss)?;
                 }
             }
@@ -257,6 +267,8 @@ impl Stage for VolumeScale<'_> {
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
         losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
             .then_some(colour_sum_generated / steps);
+        losses.height_profile =
+            (adversarial && self.config.lambda_height_profile > 0.0).then_some(height_sum / steps);
         Ok(losses)
     }
 
