@@ -61,7 +61,7 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
     assert!(
         md.contains(
             "| scale | seconds | peak MiB | iterations | reconstruction | depth | opacity | \
-             colour distribution | critic | gradient penalty | adversarial | SWD |"
+             colour distribution | height profile | critic | gradient penalty | adversarial | SWD |"
         ),
         "{md}"
     );
@@ -72,12 +72,12 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
         .find(|l| l.starts_with("| 3 |"))
         .unwrap_or_else(|| panic!("no scale 3 row in {md}"));
     let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
-    // micro: 4 iterations; the upsampler has no depth, opacity or colour-distribution term but
-    // an SWD loss.
+    // micro: 4 iterations; the upsampler has no depth, opacity, colour-distribution or
+    // height-profile term but an SWD loss.
     assert_eq!(cells[3], "4", "{row}");
-    assert_eq!(cells[5..8], ["-", "-", "-"], "{row}");
+    assert_eq!(cells[5..9], ["-", "-", "-", "-"], "{row}");
     assert_eq!(
-        cells[11],
+        cells[12],
         format!("{:.4}", last["swd"].as_f64().unwrap()),
         "{row}"
     );

@@ -47,11 +47,12 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 8] = [
+const LOSS_COLUMNS: [(&str, &str); 9] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
     ("opacity", "opacity"),
     ("colour_distribution", "colour distribution"),
+    ("height_profile", "height profile"),
     ("critic", "critic"),
     ("penalty", "gradient penalty"),
     ("adversarial", "adversarial"),
