@@ -16,6 +16,7 @@
 use candle_core::{DType, Tensor};
 use radiance_volume::Activation;
 
+use crate::dilate::dilate;
 use crate::error::{invalid, Result};
 
 /// The active-set mask `(B, 1, D, H, W)` (f32, 0 or 1) of the raw volumes `(B, 4, D, H, W)`:
@@ -70,66 +71,4 @@ pub fn active_mask(
         );
     }
     Ok(Tensor::from_vec(mask, (batch, 1, d, h, w), raw.device())?)
-}
-
-/// `cells` (z-major `[d, h, w]`) dilated by a cube of half-width `margin`: three passes, one per
-/// axis, each marking the cells within `margin` of a marked one along that axis.
-fn dilate(cells: &[bool], [d, h, w]: [usize; 3], margin: usize) -> Vec<bool> {
-    let mut current = cells.to_vec();
-    for (stride, len) in [(h * w, d), (w, h), (1, w)] {
-        let mut next = vec![false; current.len()];
-        for (i, cell) in next.iter_mut().enumerate() {
-            let at = (i / stride) % len;
-            let base = i - at * stride;
-            let lo = at.saturating_sub(margin);
-            let hi = (at + margin).min(len - 1);
-            *cell = (lo..=hi).any(|j| current[base + j * stride]);
-        }
-        current = next;
-    }
-    current
-}
-
-#[cfg(test)]
-mod tests {
-    use super::dilate;
-
-    /// The same dilation by its definition: any marked cell within Chebyshev distance `margin`.
-    fn dilate_by_definition(cells: &[bool], n: usize, margin: usize) -> Vec<bool> {
-        let at = |i: usize| [i / (n * n), (i / n) % n, i % n];
-        (0..cells.len())
-            .map(|i| {
-                (0..cells.len()).any(|j| {
-                    cells[j]
-                        && at(i)
-                            .iter()
-                            .zip(at(j))
-                            .all(|(&a, b)| a.abs_diff(b) <= margin)
-                })
-            })
-            .collect()
-    }
-
-    #[test]
-    fn dilation_matches_its_definition_on_random_sets_and_at_the_faces() {
-        let n = 6;
-        let mut state = 12345u64;
-        for density in [0.0, 0.02, 0.1, 0.5, 1.0] {
-            let cells: Vec<bool> = (0..n * n * n)
-                .map(|_| {
-                    state = state
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    ((state >> 33) as f64 / (1u64 << 31) as f64) < density
-                })
-                .collect();
-            for margin in 0..4 {
-                assert_eq!(
-                    dilate(&cells, [n, n, n], margin),
-                    dilate_by_definition(&cells, n, margin),
-                    "density {density}, margin {margin}"
-                );
-            }
-        }
-    }
 }

@@ -37,6 +37,7 @@ pub mod applications;
 pub mod checkpoint;
 pub mod config;
 pub mod dataset;
+mod dilate;
 mod error;
 pub mod fit;
 mod io;

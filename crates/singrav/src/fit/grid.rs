@@ -8,6 +8,7 @@
 use radiance_volume::{resample_tensor, Activation, GridDims};
 use rayon::prelude::*;
 
+use crate::dilate::dilate;
 use crate::error::Result;
 
 /// Adam's decay rates and epsilon (PyTorch's defaults).
@@ -210,7 +211,7 @@ impl FitGrid {
             .par_iter()
             .map(|&r| scale * softplus(r + shift) >= threshold_sigma)
             .collect();
-        self.live = dilate(&dense, s);
+        self.live = dilate(&dense, [s, s, s], 1);
         self.live_count = self.live.iter().filter(|&&l| l).count();
     }
 
@@ -265,23 +266,6 @@ fn add_tv_gradient(x: &[f32], grad: &mut [f32], s: usize, weight: f32) {
                 }
             }
         });
-}
-
-/// The mask of voxels of an `s^3` grid within one voxel (chessboard distance) of a set one.
-fn dilate(mask: &[bool], s: usize) -> Vec<bool> {
-    let plane = s * s;
-    let mut out = vec![false; mask.len()];
-    out.par_chunks_mut(plane).enumerate().for_each(|(z, out)| {
-        for y in 0..s {
-            for x in 0..s {
-                let near = |lo: usize, hi: usize| lo.saturating_sub(1)..(hi + 2).min(s);
-                out[y * s + x] = near(z, z).any(|zz| {
-                    near(y, y).any(|yy| near(x, x).any(|xx| mask[zz * plane + yy * s + xx]))
-                });
-            }
-        }
-    });
-    out
 }
 
 #[cfg(test)]
@@ -386,7 +370,7 @@ mod tests {
         let s = 5;
         let mut mask = vec![false; s * s * s];
         mask[(2 * s + 2) * s + 2] = true;
-        let out = dilate(&mask, s);
+        let out = dilate(&mask, [s, s, s], 1);
         assert_eq!(out.iter().filter(|&&m| m).count(), 27);
         assert!(out[(s + 1) * s + 1] && out[(3 * s + 3) * s + 3] && !out[0]);
     }
