@@ -265,6 +265,18 @@ const VOLUME_GROWTH: f64 = 4.0 / 3.0;
 /// Renderings grow by 1.5 per scale.
 const IMAGE_GROWTH: f64 = 1.5;
 
+/// Errors, naming `field`, unless the loss weight `value` is finite and >= 0.
+fn check_weight(field: &str, value: f64) -> Result<()> {
+    if value >= 0.0 && value.is_finite() {
+        Ok(())
+    } else {
+        Err(invalid(
+            field,
+            format!("expected a finite weight >= 0, got {value}"),
+        ))
+    }
+}
+
 /// `count` sizes starting at `first`, each `growth` times the previous, rounded.
 fn geometric(first: usize, growth: f64, count: usize) -> Vec<usize> {
     (0..count)
@@ -540,33 +552,18 @@ impl TrainConfig {
 
     /// Checks that the sizes agree and every setting is in range.
     pub fn validate(&self) -> Result<()> {
-        if !(self.lambda_fitted >= 0.0 && self.lambda_fitted.is_finite()) {
-            return Err(invalid(
-                "lambda_fitted",
-                format!("expected a finite weight >= 0, got {}", self.lambda_fitted),
-            ));
-        }
+        check_weight("lambda_fitted", self.lambda_fitted)?;
+        check_weight("lambda_height_profile", self.lambda_height_profile)?;
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;
         }
-        if self.lambda_height_profile != 0.0 {
-            if !(self.lambda_height_profile > 0.0 && self.lambda_height_profile.is_finite()) {
-                return Err(invalid(
-                    "lambda_height_profile",
-                    format!(
-                        "expected a finite weight >= 0, got {}",
-                        self.lambda_height_profile
-                    ),
-                ));
-            }
-            if !self.critic_opacity {
-                return Err(invalid(
-                    "lambda_height_profile",
-                    "compares the samples' rendered opacity, which the critics' views hold only \
-                     with critic_opacity on (--no-opacity turns it off); set \
-                     lambda_height_profile=0 or critic_opacity=true",
-                ));
-            }
+        if self.lambda_height_profile > 0.0 && !self.critic_opacity {
+            return Err(invalid(
+                "lambda_height_profile",
+                "compares the samples' rendered opacity, which the critics' views hold only \
+                 with critic_opacity on (--no-opacity turns it off); set \
+                 lambda_height_profile=0 or critic_opacity=true",
+            ));
         }
         if let Some(from) = self.sparse_from_scale {
             if from < 2 {
