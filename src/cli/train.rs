@@ -417,3 +417,36 @@ fn format_losses(l: &StepLosses) -> String {
     }
     parts.join(" ")
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use singrav::TrainConfig;
+
+    use super::TrainOptions;
+
+    /// `train`'s options alone, as the command line parses them.
+    #[derive(clap::Parser)]
+    struct Options {
+        #[command(flatten)]
+        options: TrainOptions,
+    }
+
+    fn config(args: &[&str]) -> TrainConfig {
+        let parsed = Options::try_parse_from(std::iter::once("train").chain(args.iter().copied()));
+        parsed.unwrap().options.config().unwrap()
+    }
+
+    #[test]
+    fn presets_run_the_active_set_and_dense_turns_it_off() {
+        let tiny = config(&["--preset", "tiny"]);
+        assert_eq!(tiny.sparse_from_scale, Some(2));
+        assert!(tiny.sparse_shell);
+        let dense = config(&["--preset", "tiny", "--dense"]);
+        assert_eq!(dense.sparse_from_scale, None);
+        assert_eq!(config(&["--preset", "micro"]).sparse_from_scale, None);
+        let margin_only = config(&["--preset", "small", "--set", "sparse_shell=false"]);
+        assert_eq!(margin_only.sparse_from_scale, Some(2));
+        assert!(!margin_only.sparse_shell);
+    }
+}

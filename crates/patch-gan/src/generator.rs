@@ -1,8 +1,11 @@
 //! `Generator3d`: the paper's L-layer 3D convolutional generator G_n (n < N).
 
+use std::sync::Arc;
+
 use candle_core::{ModuleT, Tensor};
 use candle_nn::{Module, VarBuilder};
 
+use crate::active::{self, ActiveSites};
 use crate::conv::{conv3d, op, Conv3d, ConvConfig};
 use crate::error::{invalid, Result};
 use crate::norm::{batch_norm3d, BatchNorm3d, LEAKY_SLOPE};
@@ -160,36 +163,76 @@ impl Generator3d {
     /// `V_n = up(V_{n-1}) + G_n(z_n + up(V_{n-1}))`. Needs `in_channels == out_channels` and `z`,
     /// `prev_up` of the same shape.
     pub fn forward_residual(&self, z: &Tensor, prev_up: &Tensor, train: bool) -> Result<Tensor> {
-        self.forward_residual_masked(z, prev_up, None, train)
+        self.check_residual(z, prev_up)?;
+        let residual = self.forward_t(&(z + prev_up)?, train)?;
+        Ok((prev_up + residual)?)
     }
 
-    /// [`Generator3d::forward_residual`] with the residual applied only where `mask` is 1:
-    /// `prev_up + mask * G(z + prev_up)`, `mask` of shape `(B, 1, D, H, W)` (broadcast over the
-    /// channels; 0 and 1, or any weights). The generator still convolves every voxel: this is
-    /// the active-set model's math, computed densely; where the mask is 0 the volume stays
-    /// `prev_up` and no gradient reaches the generator from there.
+    /// The residual form on the active sites only: `prev_up + S(G_A(z + prev_up))`, where `G_A`
+    /// is the generator run as submanifold layers on `sites` (each convolution computes the
+    /// active sites only and reads inactive voxels as zero; BatchNorm takes its statistics over
+    /// the active sites of the batch) and `S` scatters its output to the sites' voxels. Outside
+    /// the active set the volume stays `prev_up`, and no gradient reaches the generator from
+    /// there. With `A` the mask of the sites, this is the dense generator with its input and
+    /// every layer's output multiplied by `A` and BatchNorm statistics over `A`'s voxels; it costs
+    /// in proportion to the active sites. An empty set returns `prev_up`.
     ///
     /// ```
+    /// use std::sync::Arc;
     /// use candle_core::{DType, Device, Tensor};
     /// use candle_nn::{VarBuilder, VarMap};
-    /// use patch_gan::{Generator3d, Generator3dConfig};
+    /// use patch_gan::{ActiveSites, Generator3d, Generator3dConfig};
+    /// let dev = Device::Cpu;
     /// let varmap = VarMap::new();
-    /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
     /// let g2 = Generator3d::new(&Generator3dConfig::for_scale(2, 5), vb.pp("g2"))?;
-    /// let z = Tensor::ones((1, 4, 6, 6, 6), DType::F32, &Device::Cpu)?;
-    /// let prev_up = Tensor::zeros((1, 4, 6, 6, 6), DType::F32, &Device::Cpu)?;
-    /// let nothing_active = Tensor::zeros((1, 1, 6, 6, 6), DType::F32, &Device::Cpu)?;
-    /// let v = g2.forward_residual_masked(&z, &prev_up, Some(&nothing_active), true)?;
-    /// assert_eq!(v.abs()?.sum_all()?.to_scalar::<f32>()?, 0.0);
+    /// let z = Tensor::randn(0f32, 1., (1, 4, 6, 6, 6), &dev)?;
+    /// let prev_up = Tensor::zeros((1, 4, 6, 6, 6), DType::F32, &dev)?;
+    /// // The lower half of the box is active.
+    /// let mask = Tensor::cat(&[Tensor::ones((1, 1, 3, 6, 6), DType::F32, &dev)?,
+    ///                          Tensor::zeros((1, 1, 3, 6, 6), DType::F32, &dev)?], 2)?;
+    /// let sites = Arc::new(ActiveSites::from_mask(&mask, 3)?);
+    /// let v = g2.forward_residual_active(&z, &prev_up, &sites, true)?;
+    /// // The upper half is left as it was.
+    /// assert_eq!(v.narrow(2, 3, 3)?.abs()?.sum_all()?.to_scalar::<f32>()?, 0.0);
     /// # Ok::<(), patch_gan::Error>(())
     /// ```
-    pub fn forward_residual_masked(
+    pub fn forward_residual_active(
         &self,
         z: &Tensor,
         prev_up: &Tensor,
-        mask: Option<&Tensor>,
+        sites: &Arc<ActiveSites>,
         train: bool,
     ) -> Result<Tensor> {
+        self.check_residual(z, prev_up)?;
+        if sites.is_empty() {
+            return Ok(prev_up.clone());
+        }
+        if sites.kernel() != self.config.kernel {
+            return Err(invalid(
+                "Generator3d active sites",
+                format!(
+                    "built for kernel {}, the generator's is {}",
+                    sites.kernel(),
+                    self.config.kernel
+                ),
+            ));
+        }
+        let mut h = active::gather(&(z + prev_up)?, sites)?;
+        for (conv, bn) in &self.blocks {
+            let convolved = op::conv3d_active(&h, conv.weight(), sites)?;
+            h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
+        }
+        let mut residual = op::conv3d_active(&h, self.tail.weight(), sites)?;
+        if let Some(bias) = self.tail.bias() {
+            residual = residual.broadcast_add(&bias.reshape((1, (), 1, 1, 1))?)?;
+        }
+        Ok((prev_up + active::scatter(&residual, sites)?)?)
+    }
+
+    /// Checks what both residual forms need: `in_channels == out_channels` and `z`, `prev_up`
+    /// of one shape.
+    fn check_residual(&self, z: &Tensor, prev_up: &Tensor) -> Result<()> {
         if self.config.in_channels != self.config.out_channels {
             return Err(invalid(
                 "Generator3d residual",
@@ -209,25 +252,7 @@ impl Generator3d {
                 ),
             ));
         }
-        if let Some(mask) = mask {
-            let (batch, _, d, h, w) = prev_up.dims5()?;
-            if mask.dims() != [batch, 1, d, h, w] {
-                return Err(invalid(
-                    "Generator3d residual",
-                    format!(
-                        "mask {:?} is not one channel of the volume {:?}",
-                        mask.shape(),
-                        prev_up.shape()
-                    ),
-                ));
-            }
-        }
-        let residual = self.forward_t(&(z + prev_up)?, train)?;
-        let residual = match mask {
-            None => residual,
-            Some(mask) => residual.broadcast_mul(mask)?,
-        };
-        Ok((prev_up + residual)?)
+        Ok(())
     }
 }
 

@@ -5,6 +5,8 @@
 //! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight. The
 //! same kernel runs [`Conv2d`] ([`functional::conv2d`]), which the critics and the upsampler use:
 //! faster than candle's CPU conv2d, and differentiable to any order (the gradient penalty).
+//! [`active`] runs a generator on the active sites of its volumes only (submanifold
+//! convolutions, [`Generator3d::forward_residual_active`]), at a cost in proportion to them.
 //!
 //! Conventions:
 //! - Volumes are `(N, C, D, H, W)` (D along z, H along y, W along x), images `(N, C, H, W)`.
@@ -38,6 +40,7 @@
 //! # Ok::<(), patch_gan::Error>(())
 //! ```
 
+pub mod active;
 mod conv;
 mod discriminator;
 mod element;
@@ -52,9 +55,10 @@ mod wgan;
 
 /// Stateless ops, named after `torch.nn.functional`.
 pub mod functional {
-    pub use crate::conv::op::{conv2d, conv3d, conv3d_by_slices};
+    pub use crate::conv::op::{conv2d, conv3d, conv3d_active, conv3d_by_slices};
 }
 
+pub use active::ActiveSites;
 pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv2d, Conv3d, ConvConfig};
 pub use discriminator::{receptive_field, PatchDiscriminator2d, PatchDiscriminator2dConfig};
 pub use error::{Error, Result};

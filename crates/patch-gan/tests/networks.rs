@@ -127,60 +127,6 @@ fn residual_form_adds_the_upsampled_volume() {
 }
 
 #[test]
-fn masked_residual_leaves_inactive_voxels_and_their_gradient_alone() {
-    let varmap = VarMap::new();
-    let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
-    let g = Generator3d::new(&Generator3dConfig::for_scale(3, 5), vb).unwrap();
-    let z = random(&[1, 4, 4, 4, 4], 5);
-    let prev = random(&[1, 4, 4, 4, 4], 6);
-    let active: Vec<f64> = (0..64).map(|i| f64::from(u8::from(i % 3 == 0))).collect();
-    let mask = Tensor::from_vec(active.clone(), (1, 1, 4, 4, 4), &Device::Cpu).unwrap();
-    let v = g
-        .forward_residual_masked(&z, &prev, Some(&mask), true)
-        .unwrap();
-    let full = g.forward_residual(&z, &prev, true).unwrap();
-    let (v, full, prev_values): (Vec<f64>, Vec<f64>, Vec<f64>) = (
-        v.flatten_all().unwrap().to_vec1().unwrap(),
-        full.flatten_all().unwrap().to_vec1().unwrap(),
-        prev.flatten_all().unwrap().to_vec1().unwrap(),
-    );
-    for i in 0..v.len() {
-        let expected = if active[i % 64] == 1.0 {
-            full[i]
-        } else {
-            prev_values[i]
-        };
-        assert_eq!(v[i], expected, "value {i}");
-    }
-    // A loss on the inactive voxels only gives the generator no gradient.
-    let inactive = (1.0 - &mask).unwrap();
-    let v = g
-        .forward_residual_masked(&z, &prev, Some(&mask), true)
-        .unwrap();
-    let loss = v
-        .sqr()
-        .unwrap()
-        .broadcast_mul(&inactive)
-        .unwrap()
-        .sum_all()
-        .unwrap();
-    let grads = loss.backward().unwrap();
-    for (name, var) in varmap.data().lock().unwrap().iter() {
-        if let Some(grad) = grads.get(var.as_tensor()) {
-            let largest = grad.abs().unwrap().flatten_all().unwrap().max(0).unwrap();
-            assert_eq!(largest.to_scalar::<f64>().unwrap(), 0.0, "{name}");
-        }
-    }
-    // A mask of another shape is refused, naming both shapes.
-    let wrong = Tensor::ones((1, 4, 4, 4, 4), DType::F64, &Device::Cpu).unwrap();
-    let err = g
-        .forward_residual_masked(&z, &prev, Some(&wrong), true)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("mask [1, 4, 4, 4, 4]"), "{err}");
-}
-
-#[test]
 fn generator_checkpoint_round_trips_through_safetensors() {
     let dev = Device::Cpu;
     let varmap = VarMap::new();

@@ -94,7 +94,8 @@ pub struct TrainConfig {
     pub lambda_colour: f64,
     /// The first 3D scale (2 or more, counted from 1) whose generator changes the volume only in
     /// the active set: near matter of the upsampled coarser volume (see [`crate::active_set`]).
-    /// `None` (the paper's model, `--dense`, and runs made before it existed): every voxel.
+    /// `None` (the paper's model, `--dense`, the `micro` preset, and runs made before it
+    /// existed): every voxel. The other presets: 2.
     #[serde(default)]
     pub sparse_from_scale: Option<usize>,
     /// Density `sigma` (1/world-length, as [`TrainConfig::density_scale`]'s) above which a voxel
@@ -104,6 +105,11 @@ pub struct TrainConfig {
     /// Voxels around matter that the active set adds (a cube of this half-width).
     #[serde(default)]
     pub sparse_margin: usize,
+    /// Leave the inside of matter out of the active set too: active only within
+    /// `sparse_margin` voxels of both matter and air (see [`crate::active_set::ActiveSetRule`]).
+    /// `false` in runs made before it existed.
+    #[serde(default)]
+    pub sparse_shell: bool,
     /// Weight of the height-profile loss of generated scenes at the 3D scales: the squared
     /// difference between the mean opacity of each pixel row of a sample's rendering and of the
     /// real view's alpha from the same camera (matter may move sideways, not up into the sky).
@@ -260,6 +266,12 @@ const SPARSE_THRESHOLD: f32 = 0.1;
 /// Voxels of margin the active set adds around matter.
 const SPARSE_MARGIN: usize = 2;
 
+/// The first 3D scale on the active set in the presets: every scale with a coarser volume. On
+/// `tiny` (three seeds, docs/training.md) the active set with its shell from scale 2 matched the
+/// dense model on every metric within the seeds' spread, and a generator step at the paper's
+/// 95^3 and 126^3 is 5.2x and 7.4x faster on it (docs/performance-patch-gan.md).
+const SPARSE_FROM_SCALE: usize = 2;
+
 /// The volume grows by 4/3 per scale.
 const VOLUME_GROWTH: f64 = 4.0 / 3.0;
 /// Renderings grow by 1.5 per scale.
@@ -314,7 +326,10 @@ impl TrainConfig {
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
     ///   5x the paper's and the samples' height profile (both measured in docs/training.md);
     ///   about ten minutes on 2 CPU cores.
-    /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds).
+    /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds); dense finer scale.
+    ///
+    /// Every preset but `micro` runs its finer 3D scales on the active set, shell included
+    /// (`sparse_from_scale` 2, `sparse_shell`; `--dense` for the paper's dense model).
     pub fn preset(name: &str) -> Result<Self> {
         let paper = Self {
             preset: "paper".into(),
@@ -340,9 +355,10 @@ impl TrainConfig {
             critic_opacity: true,
             lambda_colour: LAMBDA_COLOUR,
             lambda_height_profile: 0.0,
-            sparse_from_scale: None,
+            sparse_from_scale: Some(SPARSE_FROM_SCALE),
             sparse_threshold: SPARSE_THRESHOLD,
             sparse_margin: SPARSE_MARGIN,
+            sparse_shell: true,
             noise_amp_factor: 0.1,
             noise_amp_first: 1.0,
             density_scale: 25.0,
@@ -407,6 +423,9 @@ impl TrainConfig {
                 d_steps: 1,
                 g_steps: 1,
                 checkpoint_seconds: 0,
+                // The paper's dense finer scale, so the tests that train `micro` cover it;
+                // the active set has tests of its own.
+                sparse_from_scale: None,
                 ..scaled("micro", 3, 8, 12)
             }),
             other => Err(invalid(
@@ -703,6 +722,16 @@ impl TrainConfig {
         Ok(())
     }
 
+    /// The rule of the finer scales' active sets: `sparse_threshold`, `sparse_margin`,
+    /// `sparse_shell`.
+    pub fn active_set_rule(&self) -> crate::active_set::ActiveSetRule {
+        crate::active_set::ActiveSetRule {
+            threshold: self.sparse_threshold,
+            margin: self.sparse_margin,
+            shell: self.sparse_shell,
+        }
+    }
+
     /// The activation mapping the generators' raw volumes to physical ones.
     pub fn activation(&self) -> radiance_volume::Activation {
         radiance_volume::Activation::default()
@@ -736,6 +765,7 @@ mod tests {
             "sparse_from_scale",
             "sparse_threshold",
             "sparse_margin",
+            "sparse_shell",
         ] {
             fields.remove(field);
         }
@@ -746,6 +776,7 @@ mod tests {
         assert_eq!(old.scale_views, None);
         assert_eq!(old.lambda_height_profile, 0.0);
         assert_eq!(old.sparse_from_scale, None);
+        assert!(!old.sparse_shell);
         assert_eq!(old.views(1), ScaleViews::same(old.views_per_step));
         old.validate().unwrap();
     }

@@ -3,10 +3,11 @@
 //! amplitudes and the fixed reconstruction noise z*_1.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
 use candle_nn::{Module, VarBuilder, VarMap};
-use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
+use patch_gan::{ActiveSites, Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
 use radiance_volume::{resample_tensor, GridDims};
 
 use crate::active_set::active_mask;
@@ -328,16 +329,18 @@ impl SinGrav {
             .filter(|_| n >= 2)
             .ok_or_else(|| invalid("scale", format!("3D scale {n} is not built")))?;
         let up = self.upsample_to_scale(prev, n)?;
-        let mask = match self.config.sparse_from_scale {
-            Some(from) if n >= from => Some(active_mask(
-                &up,
-                &self.config.activation(),
-                self.config.sparse_threshold,
-                self.config.sparse_margin,
-            )?),
-            _ => None,
-        };
-        Ok(generator.forward_residual_masked(z, &up, mask.as_ref(), true)?)
+        match self.config.sparse_from_scale {
+            Some(from) if n >= from => {
+                let mask = active_mask(
+                    &up,
+                    &self.config.activation(),
+                    &self.config.active_set_rule(),
+                )?;
+                let sites = Arc::new(ActiveSites::from_mask(&mask, generator.config().kernel)?);
+                Ok(generator.forward_residual_active(z, &up, &sites, true)?)
+            }
+            _ => Ok(generator.forward_residual(z, &up, true)?),
+        }
     }
 
     /// Resamples a raw volume to the size of 3D scale `n` (trilinear, differentiable).

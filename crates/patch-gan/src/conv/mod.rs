@@ -2,6 +2,7 @@
 //! lacks) and [`Conv2d`] (faster on the CPU than candle's, and differentiable to any order), both
 //! on one chunked im2col + `gemm` CPU kernel.
 
+mod active;
 mod conv2d;
 mod conv3d;
 mod cpu;

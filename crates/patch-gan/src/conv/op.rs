@@ -5,11 +5,15 @@
 //! two. Their backward passes build tracked tensors, which makes gradients of any order available
 //! (the WGAN-GP penalty differentiates the critic's input gradient with respect to its weights).
 
+use std::sync::Arc;
+
 use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
 
+use super::active::{self, ActiveGeometry};
 use super::cpu::{self, Geometry};
 use super::winograd;
 use super::ConvConfig;
+use crate::active::ActiveSites;
 use crate::element::Element;
 use crate::error::{invalid, Result};
 use crate::storage;
@@ -38,7 +42,7 @@ pub fn conv3d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     if !xs.device().is_cpu() {
         return super::slices::conv3d_by_slices(xs, kernel, &g);
     }
-    Ok(apply(xs, kernel, ConvOp(spec))?)
+    Ok(apply(xs, kernel, ConvOp(Domain::Grid(spec)))?)
 }
 
 /// 2D cross-correlation of `xs` `(N, C_in, H, W)` with `kernel` `(C_out, C_in, kh, kw)`, as
@@ -86,7 +90,7 @@ pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     let kernel = kernel.reshape((c_out, kc_in, 1, kh, kw))?;
     let g = geometry(xs.shape(), kernel.shape(), spec)?;
     let [_, h_out, w_out] = g.output();
-    Ok(apply(&xs, &kernel, ConvOp(spec))?.reshape((n, c_out, h_out, w_out))?)
+    Ok(apply(&xs, &kernel, ConvOp(Domain::Grid(spec)))?.reshape((n, c_out, h_out, w_out))?)
 }
 
 /// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public
@@ -107,6 +111,119 @@ pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
 pub fn conv3d_by_slices(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     let g = geometry(xs.shape(), kernel.shape(), Spec::uniform(cfg))?;
     super::slices::conv3d_by_slices(xs, kernel, &g)
+}
+
+/// The submanifold 3D convolution of `features` `(1, C_in, M, 1, 1)` on the `M` active `sites`
+/// with `kernel` `(C_out, C_in, k, k, k)` (`k` the sites' kernel, padding `k / 2`): outputs
+/// `(1, C_out, M, 1, 1)` at the active sites only, reading inactive voxels (and the box's outside)
+/// as zero. Equal to the dense [`conv3d`] of the features scattered into their volumes, gathered
+/// back at the sites (see [`ActiveSites`]); differentiable with respect to both arguments, to any
+/// order. CPU only.
+///
+/// ```
+/// use std::sync::Arc;
+/// use candle_core::{Device, Tensor};
+/// use patch_gan::{active, functional, ActiveSites, ConvConfig};
+/// let dev = Device::Cpu;
+/// let x = Tensor::rand(-1f32, 1., (1, 2, 4, 4, 4), &dev)?;
+/// let k = Tensor::rand(-1f32, 1., (3, 2, 3, 3, 3), &dev)?;
+/// // Every other voxel active.
+/// let mask: Vec<f32> = (0..64).map(|i| (i % 2) as f32).collect();
+/// let mask = Tensor::from_vec(mask, (1, 1, 4, 4, 4), &dev)?;
+/// let sites = Arc::new(ActiveSites::from_mask(&mask, 3)?);
+/// let sparse = functional::conv3d_active(&active::gather(&x, &sites)?, &k, &sites)?;
+/// let dense = functional::conv3d(&x.broadcast_mul(&mask)?, &k, ConvConfig::default().with_padding(1))?;
+/// let diff = (sparse - active::gather(&dense, &sites)?)?.abs()?.flatten_all()?.max(0)?;
+/// assert!(diff.to_scalar::<f32>()? < 1e-5);
+/// # Ok::<(), patch_gan::Error>(())
+/// ```
+pub fn conv3d_active(
+    features: &Tensor,
+    kernel: &Tensor,
+    sites: &Arc<ActiveSites>,
+) -> Result<Tensor> {
+    if !features.device().is_cpu() {
+        return Err(invalid("conv3d_active", "runs on the CPU only"));
+    }
+    let domain = Domain::Active(Arc::clone(sites));
+    domain.plan(features.shape(), kernel.shape())?;
+    Ok(apply(features, kernel, ConvOp(domain))?)
+}
+
+/// Where a convolution is evaluated: on the whole grid with padding and stride, or on the
+/// active sites of a set (submanifold).
+#[derive(Debug, Clone)]
+enum Domain {
+    Grid(Spec),
+    Active(Arc<ActiveSites>),
+}
+
+/// A convolution's geometry, checked against its arguments' shapes.
+#[derive(Debug, Clone)]
+enum Plan {
+    Grid(Geometry),
+    Active(ActiveGeometry),
+}
+
+impl Domain {
+    /// The geometry of `conv(xs, kernel)` in this domain, or an error naming the bad shape.
+    fn plan(&self, xs: &Shape, kernel: &Shape) -> Result<Plan> {
+        match self {
+            Domain::Grid(spec) => Ok(Plan::Grid(geometry(xs, kernel, *spec)?)),
+            Domain::Active(sites) => Ok(Plan::Active(active_geometry(xs, kernel, sites)?)),
+        }
+    }
+
+    fn checked(&self, xs: &Shape, kernel: &Shape) -> candle_core::Result<Plan> {
+        self.plan(xs, kernel).map_err(candle_core::Error::from)
+    }
+}
+
+impl Plan {
+    fn output_shape(&self) -> Shape {
+        match self {
+            Plan::Grid(g) => {
+                let [d, h, w] = g.output();
+                Shape::from((g.batch, g.c_out, d, h, w))
+            }
+            Plan::Active(g) => Shape::from((1, g.c_out, g.sites.len(), 1, 1)),
+        }
+    }
+}
+
+/// Checks the shapes of a convolution on active sites.
+fn active_geometry(xs: &Shape, kernel: &Shape, sites: &Arc<ActiveSites>) -> Result<ActiveGeometry> {
+    let m = sites.len();
+    let &[1, c_in, xm, 1, 1] = xs.dims() else {
+        return Err(invalid(
+            "active-site features",
+            format!("expected (1, C, {m}, 1, 1), got {xs:?}"),
+        ));
+    };
+    if xm != m {
+        return Err(invalid(
+            "active-site features",
+            format!("{xs:?} for an active set of {m} sites"),
+        ));
+    }
+    let k = sites.kernel();
+    let &[c_out, kc_in, kd, kh, kw] = kernel.dims() else {
+        return Err(invalid(
+            "kernel",
+            format!("expected (C_out, C_in, {k}, {k}, {k}), got {kernel:?}"),
+        ));
+    };
+    if [kd, kh, kw] != [k; 3] || kc_in != c_in || c_out == 0 {
+        return Err(invalid(
+            "kernel",
+            format!("expected (C_out, {c_in}, {k}, {k}, {k}) for the active set, got {kernel:?}"),
+        ));
+    }
+    Ok(ActiveGeometry {
+        c_in,
+        c_out,
+        sites: Arc::clone(sites),
+    })
 }
 
 /// The parameters every op carries: zero padding per axis `[D, H, W]` and the stride.
@@ -200,20 +317,24 @@ fn check_len(name: &'static str, first: &Layout, len: usize) -> candle_core::Res
 
 /// The three CPU kernels, each for one geometry.
 enum Kernel {
-    Forward(Geometry),
-    GradInput(Geometry),
-    GradWeight(Geometry),
+    Forward(Plan),
+    GradInput(Plan),
+    GradWeight(Plan),
 }
 
 impl storage::Kernel for Kernel {
     fn run<T: Element>(&self, a: &[T], b: &[T]) -> candle_core::Result<Vec<T>> {
+        use Plan::{Active, Grid};
         Ok(match self {
-            Kernel::Forward(g) if use_winograd(g) => winograd::forward(a, b, g),
-            Kernel::GradInput(g) if use_winograd(g) => winograd::grad_input(a, b, g),
-            Kernel::GradWeight(g) if use_winograd(g) => winograd::grad_weight(a, b, g),
-            Kernel::Forward(g) => cpu::forward(a, b, g),
-            Kernel::GradInput(g) => cpu::grad_input(a, b, g),
-            Kernel::GradWeight(g) => cpu::grad_weight(a, b, g),
+            Kernel::Forward(Grid(g)) if use_winograd(g) => winograd::forward(a, b, g),
+            Kernel::GradInput(Grid(g)) if use_winograd(g) => winograd::grad_input(a, b, g),
+            Kernel::GradWeight(Grid(g)) if use_winograd(g) => winograd::grad_weight(a, b, g),
+            Kernel::Forward(Grid(g)) => cpu::forward(a, b, g),
+            Kernel::GradInput(Grid(g)) => cpu::grad_input(a, b, g),
+            Kernel::GradWeight(Grid(g)) => cpu::grad_weight(a, b, g),
+            Kernel::Forward(Active(g)) => cpu::forward(a, b, g),
+            Kernel::GradInput(Active(g)) => active::grad_input(a, b, g),
+            Kernel::GradWeight(Active(g)) => cpu::grad_weight(a, b, g),
         })
     }
 }
@@ -227,16 +348,6 @@ const WINOGRAD_MIN_CHANNELS: usize = 32;
 /// Whether a convolution runs on the Winograd F(2, 3) kernel rather than the im2col one.
 fn use_winograd(g: &Geometry) -> bool {
     winograd::supports(g) && g.c_in.min(g.c_out) >= WINOGRAD_MIN_CHANNELS
-}
-
-fn checked(x: &Shape, kernel: &Shape, spec: Spec) -> candle_core::Result<Geometry> {
-    geometry(x, kernel, spec).map_err(candle_core::Error::from)
-}
-
-/// `(N, C_out, D_out, H_out, W_out)` of a geometry.
-fn output_shape(g: &Geometry) -> Shape {
-    let [d, h, w] = g.output();
-    Shape::from((g.batch, g.c_out, d, h, w))
 }
 
 /// The gradient `compute` gives, if `arg` is part of the autograd graph (a variable or the result
@@ -254,7 +365,7 @@ fn wanted(
 }
 
 /// Forward op: `(x, kernel) -> y`.
-struct ConvOp(Spec);
+struct ConvOp(Domain);
 
 impl CustomOp2 for ConvOp {
     fn name(&self) -> &'static str {
@@ -268,9 +379,10 @@ impl CustomOp2 for ConvOp {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = checked(l1.shape(), l2.shape(), self.0)?;
+        let g = self.0.checked(l1.shape(), l2.shape())?;
+        let shape = g.output_shape();
         let out = storage::run_binary(self.name(), (s1, l1), (s2, l2), &Kernel::Forward(g))?;
-        Ok((out, output_shape(&g)))
+        Ok((out, shape))
     }
 
     fn bwd(
@@ -281,17 +393,25 @@ impl CustomOp2 for ConvOp {
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
         let grad_xs = wanted(xs, || {
-            apply(grad, kernel, GradInputOp(self.0, xs.shape().clone()))
+            apply(
+                grad,
+                kernel,
+                GradInputOp(self.0.clone(), xs.shape().clone()),
+            )
         })?;
         let grad_kernel = wanted(kernel, || {
-            apply(xs, grad, GradKernelOp(self.0, kernel.shape().clone()))
+            apply(
+                xs,
+                grad,
+                GradKernelOp(self.0.clone(), kernel.shape().clone()),
+            )
         })?;
         Ok((grad_xs, grad_kernel))
     }
 }
 
 /// Input gradient: `(grad_out, kernel) -> grad_x` for an input of the stored shape.
-struct GradInputOp(Spec, Shape);
+struct GradInputOp(Domain, Shape);
 
 impl CustomOp2 for GradInputOp {
     fn name(&self) -> &'static str {
@@ -305,8 +425,8 @@ impl CustomOp2 for GradInputOp {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = checked(&self.1, l2.shape(), self.0)?;
-        check_len(self.name(), l1, output_shape(&g).elem_count())?;
+        let g = self.0.checked(&self.1, l2.shape())?;
+        check_len(self.name(), l1, g.output_shape().elem_count())?;
         let out = storage::run_binary(self.name(), (s1, l1), (s2, l2), &Kernel::GradInput(g))?;
         Ok((out, self.1.clone()))
     }
@@ -320,16 +440,20 @@ impl CustomOp2 for GradInputOp {
         _res: &Tensor,
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        let along_grad_out = wanted(grad_out, || apply(grad, kernel, ConvOp(self.0)))?;
+        let along_grad_out = wanted(grad_out, || apply(grad, kernel, ConvOp(self.0.clone())))?;
         let along_kernel = wanted(kernel, || {
-            apply(grad, grad_out, GradKernelOp(self.0, kernel.shape().clone()))
+            apply(
+                grad,
+                grad_out,
+                GradKernelOp(self.0.clone(), kernel.shape().clone()),
+            )
         })?;
         Ok((along_grad_out, along_kernel))
     }
 }
 
 /// Kernel gradient: `(x, grad_out) -> grad_kernel` for a kernel of the stored shape.
-struct GradKernelOp(Spec, Shape);
+struct GradKernelOp(Domain, Shape);
 
 impl CustomOp2 for GradKernelOp {
     fn name(&self) -> &'static str {
@@ -343,13 +467,13 @@ impl CustomOp2 for GradKernelOp {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = checked(l1.shape(), &self.1, self.0)?;
-        if l2.shape().elem_count() != output_shape(&g).elem_count() {
+        let g = self.0.checked(l1.shape(), &self.1)?;
+        if l2.shape().elem_count() != g.output_shape().elem_count() {
             candle_core::bail!(
                 "{}: output gradient {:?} does not match the output {:?}",
                 self.name(),
                 l2.shape(),
-                output_shape(&g)
+                g.output_shape()
             );
         }
         let out = storage::run_binary(self.name(), (s1, l1), (s2, l2), &Kernel::GradWeight(g))?;
@@ -367,9 +491,13 @@ impl CustomOp2 for GradKernelOp {
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
         let along_xs = wanted(xs, || {
-            apply(grad_out, grad, GradInputOp(self.0, xs.shape().clone()))
+            apply(
+                grad_out,
+                grad,
+                GradInputOp(self.0.clone(), xs.shape().clone()),
+            )
         })?;
-        let along_grad_out = wanted(grad_out, || apply(xs, grad, ConvOp(self.0)))?;
+        let along_grad_out = wanted(grad_out, || apply(xs, grad, ConvOp(self.0.clone())))?;
         Ok((along_xs, along_grad_out))
     }
 }
