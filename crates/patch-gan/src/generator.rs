@@ -174,8 +174,9 @@ impl Generator3d {
     /// the active sites of the batch) and `S` scatters its output to the sites' voxels. Outside
     /// the active set the volume stays `prev_up`, and no gradient reaches the generator from
     /// there. With `A` the mask of the sites, this is the dense generator with its input and
-    /// every layer's output multiplied by `A` and BatchNorm statistics over `A`'s voxels; it costs
-    /// in proportion to the active sites. An empty set returns `prev_up`.
+    /// every layer's output multiplied by `A` and BatchNorm statistics over `A`'s voxels
+    /// ([`Generator3d::forward_residual_active_dense`], which other devices than the CPU run);
+    /// on the CPU it costs in proportion to the active sites. An empty set returns `prev_up`.
     ///
     /// ```
     /// use std::sync::Arc;
@@ -208,15 +209,9 @@ impl Generator3d {
         if sites.is_empty() {
             return Ok(prev_up.clone());
         }
-        if sites.kernel() != self.config.kernel {
-            return Err(invalid(
-                "Generator3d active sites",
-                format!(
-                    "built for kernel {}, the generator's is {}",
-                    sites.kernel(),
-                    self.config.kernel
-                ),
-            ));
+        self.check_sites(sites)?;
+        if !prev_up.device().is_cpu() {
+            return self.forward_residual_active_dense(z, prev_up, sites, train);
         }
         let mut h = active::gather(&(z + prev_up)?, sites)?;
         for (conv, bn) in &self.blocks {
@@ -228,6 +223,82 @@ impl Generator3d {
             residual = residual.broadcast_add(&bias.reshape((1, (), 1, 1, 1))?)?;
         }
         Ok((prev_up + active::scatter(&residual, sites)?)?)
+    }
+
+    /// The math of [`Generator3d::forward_residual_active`] computed densely, with candle ops and
+    /// the dense convolution: the input and every layer's output multiplied by the sites' mask,
+    /// BatchNorm's statistics taken over the mask's voxels (its running statistics are not
+    /// updated). It costs as much as the dense generator; devices other than the CPU, which
+    /// have no kernel on active sites, run it in place of the sparse form.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use candle_core::{DType, Device, Tensor};
+    /// use candle_nn::{VarBuilder, VarMap};
+    /// use patch_gan::{ActiveSites, Generator3d, Generator3dConfig};
+    /// let dev = Device::Cpu;
+    /// let vb = VarBuilder::from_varmap(&VarMap::new(), DType::F32, &dev);
+    /// let g2 = Generator3d::new(&Generator3dConfig::for_scale(2, 3), vb)?;
+    /// let z = Tensor::randn(0f32, 1., (1, 4, 5, 5, 5), &dev)?;
+    /// let prev_up = Tensor::randn(0f32, 1., (1, 4, 5, 5, 5), &dev)?;
+    /// let active: Vec<bool> = (0..125).map(|i| i % 3 != 0).collect();
+    /// let sites = Arc::new(ActiveSites::new(1, [5, 5, 5], 3, &active)?);
+    /// let sparse = g2.forward_residual_active(&z, &prev_up, &sites, true)?;
+    /// let dense = g2.forward_residual_active_dense(&z, &prev_up, &sites, true)?;
+    /// let diff = (sparse - dense)?.abs()?.flatten_all()?.max(0)?.to_scalar::<f32>()?;
+    /// assert!(diff < 1e-4);
+    /// # Ok::<(), patch_gan::Error>(())
+    /// ```
+    pub fn forward_residual_active_dense(
+        &self,
+        z: &Tensor,
+        prev_up: &Tensor,
+        sites: &Arc<ActiveSites>,
+        train: bool,
+    ) -> Result<Tensor> {
+        self.check_residual(z, prev_up)?;
+        if sites.is_empty() {
+            return Ok(prev_up.clone());
+        }
+        self.check_sites(sites)?;
+        let (batch, _, d, h, w) = prev_up.dims5()?;
+        if batch != sites.batch() || [d, h, w] != sites.dims() {
+            return Err(invalid(
+                "Generator3d active sites",
+                format!(
+                    "volumes {:?} do not match the active set's {} volumes of {:?}",
+                    prev_up.shape(),
+                    sites.batch(),
+                    sites.dims()
+                ),
+            ));
+        }
+        let mask = sites.mask(prev_up.dtype(), prev_up.device())?;
+        let count = sites.len() as f64;
+        let mut h = (z + prev_up)?.broadcast_mul(&mask)?;
+        for (conv, bn) in &self.blocks {
+            let convolved = conv.forward(&h)?;
+            h = bn
+                .masked_forward(&convolved, &mask, count, LEAKY_SLOPE, train)?
+                .broadcast_mul(&mask)?;
+        }
+        let residual = self.tail.forward(&h)?.broadcast_mul(&mask)?;
+        Ok((prev_up + residual)?)
+    }
+
+    /// Errors unless `sites` were built for this generator's kernel.
+    fn check_sites(&self, sites: &ActiveSites) -> Result<()> {
+        if sites.kernel() != self.config.kernel {
+            return Err(invalid(
+                "Generator3d active sites",
+                format!(
+                    "built for kernel {}, the generator's is {}",
+                    sites.kernel(),
+                    self.config.kernel
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// Checks what both residual forms need: `in_channels == out_channels` and `z`, `prev_up`

@@ -153,6 +153,43 @@ impl BatchNorm3d {
         Ok(())
     }
 
+    /// `LeakyReLU(BatchNorm(xs))` with the batch statistics taken over the voxels where `mask`
+    /// `(N, 1, D, H, W)` is 1 (`count` of them), in candle ops: the dense form of the layer on
+    /// active sites (see [`crate::Generator3d::forward_residual_active_dense`]). Eval mode uses
+    /// the running statistics; like [`BatchNorm3d::candle_forward`] it does not update them.
+    pub(crate) fn masked_forward(
+        &self,
+        xs: &Tensor,
+        mask: &Tensor,
+        count: f64,
+        negative_slope: f64,
+        train: bool,
+    ) -> candle_core::Result<Tensor> {
+        let per_channel = |t: &Tensor| t.reshape((1, (), 1, 1, 1));
+        let channel_sum = |t: &Tensor| {
+            t.sum_keepdim(4)?
+                .sum_keepdim(3)?
+                .sum_keepdim(2)?
+                .sum_keepdim(0)
+        };
+        let (mean, var) = if train {
+            let mean = (channel_sum(&xs.broadcast_mul(mask)?)? / count)?;
+            let centred = xs.broadcast_sub(&mean)?.broadcast_mul(mask)?;
+            (mean, (channel_sum(&centred.sqr()?)? / count)?)
+        } else {
+            (
+                per_channel(self.running_mean())?,
+                per_channel(self.running_var())?,
+            )
+        };
+        let normed = xs
+            .broadcast_sub(&mean)?
+            .broadcast_div(&(var + NORM_EPS)?.sqrt()?)?
+            .broadcast_mul(&per_channel(&self.weight)?)?
+            .broadcast_add(&per_channel(&self.bias)?)?;
+        leaky_relu(&normed, negative_slope)
+    }
+
     /// The same layer in candle ops, for devices without the fused kernel (running statistics are
     /// updated by the CPU path only).
     fn candle_forward(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {

@@ -1,6 +1,7 @@
-//! The active-set (submanifold) generator against its dense definition: the same generator with
-//! its input and every layer's output masked and BatchNorm statistics taken over the mask's
-//! voxels, written here with plain candle ops and the dense convolution, in f64. Values,
+//! The active-set (submanifold) generator, and the library's dense form of it, against its dense
+//! definition: the same generator with its input and every layer's output masked and BatchNorm
+//! statistics taken over the mask's voxels, written here with plain candle ops and the dense
+//! convolution, in f64. Values,
 //! gradients (weights and noise) and the running statistics must agree, on random volumes and
 //! masks, including empty and full masks and masks that touch the box's faces.
 
@@ -190,6 +191,21 @@ fn check_against_dense(
         "values differ by {diff:e} ({kind:?}, {dims:?})"
     );
 
+    // The library's own dense form (what GPUs run) is the same math.
+    let library_dense = g
+        .forward_residual_active_dense(z.as_tensor(), &prev, &sites, true)
+        .unwrap();
+    let diff = max_rel_diff(&values(&library_dense), &values(&dense));
+    assert!(
+        diff < 1e-10,
+        "dense form differs by {diff:e} ({kind:?}, {dims:?})"
+    );
+    let library_grads = (&library_dense * &weights)
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
     let dense_grads = (&dense * &weights)
         .unwrap()
         .sum_all()
@@ -222,6 +238,9 @@ fn check_against_dense(
             diff < 1e-10,
             "gradient of {name} differs by {diff:e} ({kind:?}, {dims:?})"
         );
+        let library = values(library_grads.get(t).unwrap());
+        let diff = max_rel_diff(&library, &expected_values);
+        assert!(diff < 1e-10, "dense form's gradient of {name}: {diff:e}");
     }
 
     // Running statistics: momentum 0.1 from (0, 1), over the active voxels only.

@@ -1,6 +1,6 @@
 //! [`ActiveSites`]: the voxels a sparse generator computes, and each one's neighbours.
 
-use candle_core::{DType, Tensor};
+use candle_core::{DType, Device, Tensor};
 use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
@@ -193,6 +193,27 @@ impl ActiveSites {
     /// Flattened voxel index of each site, ascending.
     pub(crate) fn sites(&self) -> &[u32] {
         &self.sites
+    }
+
+    /// The set as a mask `(B, 1, D, H, W)` of `dtype` on `device`: 1 at the active sites, 0
+    /// elsewhere.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device};
+    /// use patch_gan::ActiveSites;
+    /// let sites = ActiveSites::new(1, [1, 2, 2], 3, &[true, false, false, true])?;
+    /// let mask = sites.mask(DType::F32, &Device::Cpu)?;
+    /// assert_eq!(mask.flatten_all()?.to_vec1::<f32>()?, [1., 0., 0., 1.]);
+    /// # Ok::<(), patch_gan::Error>(())
+    /// ```
+    pub fn mask(&self, dtype: DType, device: &Device) -> Result<Tensor> {
+        let [d, h, w] = self.dims;
+        let mut values = vec![0f32; self.batch * d * h * w];
+        for &site in &self.sites {
+            values[site as usize] = 1.0;
+        }
+        let mask = Tensor::from_vec(values, (self.batch, 1, d, h, w), device)?;
+        Ok(mask.to_dtype(dtype)?)
     }
 
     /// The runs of tap `t`'s neighbours, covering sites `0..M` in order.
