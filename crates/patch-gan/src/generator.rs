@@ -206,10 +206,10 @@ impl Generator3d {
         train: bool,
     ) -> Result<Tensor> {
         self.check_residual(z, prev_up)?;
+        self.check_sites(sites, prev_up)?;
         if sites.is_empty() {
             return Ok(prev_up.clone());
         }
-        self.check_sites(sites)?;
         if !prev_up.device().is_cpu() {
             return self.forward_residual_active_dense(z, prev_up, sites, train);
         }
@@ -257,21 +257,9 @@ impl Generator3d {
         train: bool,
     ) -> Result<Tensor> {
         self.check_residual(z, prev_up)?;
+        self.check_sites(sites, prev_up)?;
         if sites.is_empty() {
             return Ok(prev_up.clone());
-        }
-        self.check_sites(sites)?;
-        let (batch, _, d, h, w) = prev_up.dims5()?;
-        if batch != sites.batch() || [d, h, w] != sites.dims() {
-            return Err(invalid(
-                "Generator3d active sites",
-                format!(
-                    "volumes {:?} do not match the active set's {} volumes of {:?}",
-                    prev_up.shape(),
-                    sites.batch(),
-                    sites.dims()
-                ),
-            ));
         }
         let mask = sites.mask(prev_up.dtype(), prev_up.device())?;
         let count = sites.len() as f64;
@@ -286,8 +274,21 @@ impl Generator3d {
         Ok((prev_up + residual)?)
     }
 
-    /// Errors unless `sites` were built for this generator's kernel.
-    fn check_sites(&self, sites: &ActiveSites) -> Result<()> {
+    /// Errors unless `sites` were built for this generator's kernel and the volumes' batch and
+    /// size.
+    fn check_sites(&self, sites: &ActiveSites, volumes: &Tensor) -> Result<()> {
+        let (batch, _, d, h, w) = volumes.dims5()?;
+        if batch != sites.batch() || [d, h, w] != sites.dims() {
+            return Err(invalid(
+                "Generator3d active sites",
+                format!(
+                    "volumes {:?} do not match the active set's {} volumes of {:?}",
+                    volumes.shape(),
+                    sites.batch(),
+                    sites.dims()
+                ),
+            ));
+        }
         if sites.kernel() != self.config.kernel {
             return Err(invalid(
                 "Generator3d active sites",

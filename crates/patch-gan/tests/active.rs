@@ -372,3 +372,40 @@ proptest! {
         check_against_dense(batch, [d, h, w], channels, layers, kind, seed);
     }
 }
+
+#[test]
+fn wide_convolutions_span_several_chunks_and_match_the_masked_dense_one() {
+    // 64 channels each way: an im2col column of 1728 values, so a chunk holds 144 sites and the
+    // ~500 sites here take several chunks in every pass (forward, input and weight gradients).
+    let x = Var::from_tensor(&random(&[1, 64, 10, 10, 10], 41)).unwrap();
+    let k = Var::from_tensor(&random(&[64, 64, 3, 3, 3], 42)).unwrap();
+    let mask = mask_tensor(1, [10, 10, 10], MaskKind::Random(0.5), 43);
+    let sites = Arc::new(ActiveSites::from_mask(&mask, 3).unwrap());
+    assert!(sites.len() > 3 * 144, "{} sites", sites.len());
+    let weights = random(&[1, 64, sites.len(), 1, 1], 44);
+    let gathered = active::gather(x.as_tensor(), &sites).unwrap();
+    let sparse = functional::conv3d_active(&gathered, k.as_tensor(), &sites).unwrap();
+    let masked = x.as_tensor().broadcast_mul(&mask).unwrap();
+    let dense = functional::conv3d(
+        &masked,
+        k.as_tensor(),
+        ConvConfig::default().with_padding(1),
+    );
+    let dense = active::gather(&dense.unwrap(), &sites).unwrap();
+    assert!(max_rel_diff(&values(&sparse), &values(&dense)) < 1e-12);
+    let loss = |y: &Tensor| {
+        (y * &weights)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap()
+    };
+    let (sparse_grads, dense_grads) = (loss(&sparse), loss(&dense));
+    for (name, var) in [("input", &x), ("kernel", &k)] {
+        let a = values(sparse_grads.get(var.as_tensor()).unwrap());
+        let e = values(dense_grads.get(var.as_tensor()).unwrap());
+        let diff = max_rel_diff(&a, &e);
+        assert!(diff < 1e-12, "{name} gradient differs by {diff:e}");
+    }
+}

@@ -116,6 +116,9 @@ fn main() -> Result<(), BoxError> {
             name => presets.push(name.to_string()),
         }
     }
+    if reps == 0 {
+        return Err("--reps needs at least 1 timed repetition".into());
+    }
     if presets.is_empty() {
         presets = vec!["small".into(), "paper".into()];
     }
@@ -131,7 +134,13 @@ fn main() -> Result<(), BoxError> {
     for preset in &presets {
         let config = TrainConfig::preset(preset)?;
         let rules = [
-            ("margin", config.active_set_rule()),
+            (
+                "margin",
+                ActiveSetRule {
+                    shell: false,
+                    ..config.active_set_rule()
+                },
+            ),
             (
                 "shell",
                 ActiveSetRule {

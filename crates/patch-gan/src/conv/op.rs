@@ -213,7 +213,7 @@ fn active_geometry(xs: &Shape, kernel: &Shape, sites: &Arc<ActiveSites>) -> Resu
             format!("expected (C_out, C_in, {k}, {k}, {k}), got {kernel:?}"),
         ));
     };
-    if [kd, kh, kw] != [k; 3] || kc_in != c_in || c_out == 0 {
+    if [kd, kh, kw] != [k; 3] || kc_in != c_in || c_out == 0 || c_in == 0 {
         return Err(invalid(
             "kernel",
             format!("expected (C_out, {c_in}, {k}, {k}, {k}) for the active set, got {kernel:?}"),
@@ -257,10 +257,10 @@ fn geometry(xs: &Shape, kernel: &Shape, spec: Spec) -> Result<Geometry> {
             format!("expected (C_out, C_in, kd, kh, kw), got {kernel:?}"),
         ));
     };
-    if [c_out, kd, kh, kw].contains(&0) {
+    if [c_out, kc_in, kd, kh, kw].contains(&0) {
         return Err(invalid(
             "kernel",
-            format!("needs at least one output channel and one tap per axis, got {kernel:?}"),
+            format!("needs at least one channel each way and one tap per axis, got {kernel:?}"),
         ));
     }
     if kc_in != c_in {
