@@ -205,15 +205,13 @@ impl Generator3d {
         sites: &Arc<ActiveSites>,
         train: bool,
     ) -> Result<Tensor> {
-        self.check_residual(z, prev_up)?;
-        self.check_sites(sites, prev_up)?;
-        if sites.is_empty() {
+        let Some(input) = self.active_input(z, prev_up, sites)? else {
             return Ok(prev_up.clone());
-        }
+        };
         if !prev_up.device().is_cpu() {
             return self.forward_residual_active_dense(z, prev_up, sites, train);
         }
-        let mut h = active::gather(&(z + prev_up)?, sites)?;
+        let mut h = active::gather(&input, sites)?;
         for (conv, bn) in &self.blocks {
             let convolved = op::conv3d_active(&h, conv.weight(), sites)?;
             h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
@@ -256,14 +254,12 @@ impl Generator3d {
         sites: &Arc<ActiveSites>,
         train: bool,
     ) -> Result<Tensor> {
-        self.check_residual(z, prev_up)?;
-        self.check_sites(sites, prev_up)?;
-        if sites.is_empty() {
+        let Some(input) = self.active_input(z, prev_up, sites)? else {
             return Ok(prev_up.clone());
-        }
+        };
         let mask = sites.mask(prev_up.dtype(), prev_up.device())?;
         let count = sites.len() as f64;
-        let mut h = (z + prev_up)?.broadcast_mul(&mask)?;
+        let mut h = input.broadcast_mul(&mask)?;
         for (conv, bn) in &self.blocks {
             let convolved = conv.forward(&h)?;
             h = bn
@@ -274,21 +270,17 @@ impl Generator3d {
         Ok((prev_up + residual)?)
     }
 
-    /// Errors unless `sites` were built for this generator's kernel and the volumes' batch and
-    /// size.
-    fn check_sites(&self, sites: &ActiveSites, volumes: &Tensor) -> Result<()> {
-        let (batch, _, d, h, w) = volumes.dims5()?;
-        if batch != sites.batch() || [d, h, w] != sites.dims() {
-            return Err(invalid(
-                "Generator3d active sites",
-                format!(
-                    "volumes {:?} do not match the active set's {} volumes of {:?}",
-                    volumes.shape(),
-                    sites.batch(),
-                    sites.dims()
-                ),
-            ));
-        }
+    /// The generator's input `z + prev_up` for the two active-set forms, after their checks
+    /// (the residual's shapes, `sites` built for these volumes and this generator's kernel), or
+    /// `None` when no site is active (the volume stays `prev_up`).
+    fn active_input(
+        &self,
+        z: &Tensor,
+        prev_up: &Tensor,
+        sites: &ActiveSites,
+    ) -> Result<Option<Tensor>> {
+        self.check_residual(z, prev_up)?;
+        sites.check_volumes("Generator3d active sites", prev_up)?;
         if sites.kernel() != self.config.kernel {
             return Err(invalid(
                 "Generator3d active sites",
@@ -299,7 +291,10 @@ impl Generator3d {
                 ),
             ));
         }
-        Ok(())
+        if sites.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some((z + prev_up)?))
     }
 
     /// Checks what both residual forms need: `in_channels == out_channels` and `z`, `prev_up`

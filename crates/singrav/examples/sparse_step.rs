@@ -20,9 +20,9 @@ use std::time::Instant;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use patch_gan::{ActiveSites, Generator3d, Generator3dConfig};
+use patch_gan::{Generator3d, Generator3dConfig};
 use radiance_volume::{resample_tensor, GridDims};
-use singrav::active_set::{active_mask, ActiveSetRule};
+use singrav::active_set::{active_sites, ActiveSetRule};
 use singrav::noise::{gaussian_volume, step_rng};
 use singrav::scenes::SceneKind;
 use singrav::TrainConfig;
@@ -168,8 +168,12 @@ fn main() -> Result<(), BoxError> {
             };
             let mut fractions = [0.0; 2];
             let mut sparse_step = |rule: usize| -> Result<(), BoxError> {
-                let mask = active_mask(&up, &config.activation(), &rules[rule].1)?;
-                let sites = Arc::new(ActiveSites::from_mask(&mask, g_config.kernel)?);
+                let sites = Arc::new(active_sites(
+                    &up,
+                    &config.activation(),
+                    &rules[rule].1,
+                    g_config.kernel,
+                )?);
                 fractions[rule] = sites.fraction();
                 let v = generator.forward_residual_active(&z, &up, &sites, true)?;
                 v.sqr()?.mean_all()?.backward()?;

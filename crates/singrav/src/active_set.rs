@@ -17,6 +17,7 @@
 //! [`TrainConfig::sparse_threshold`]: crate::TrainConfig::sparse_threshold
 
 use candle_core::{DType, Tensor};
+use patch_gan::ActiveSites;
 use radiance_volume::Activation;
 
 use crate::dilate::dilate;
@@ -60,6 +61,45 @@ pub struct ActiveSetRule {
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn active_mask(raw: &Tensor, activation: &Activation, rule: &ActiveSetRule) -> Result<Tensor> {
+    let (active, batch, [d, h, w]) = active_voxels(raw, activation, rule)?;
+    let mask = active
+        .into_iter()
+        .map(|a| if a { 1f32 } else { 0.0 })
+        .collect();
+    Ok(Tensor::from_vec(mask, (batch, 1, d, h, w), raw.device())?)
+}
+
+/// The active set of [`active_mask`] as the sites a generator with `kernel`-tap kernels runs on
+/// (what training and sampling use, without a mask tensor in between).
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use radiance_volume::Activation;
+/// use singrav::active_set::{active_sites, ActiveSetRule};
+/// let mut raw = vec![-20f32; 4 * 125];
+/// raw[0] = 20.0;
+/// let raw = Tensor::from_vec(raw, (1, 4, 5, 5, 5), &Device::Cpu)?;
+/// let rule = ActiveSetRule { threshold: 0.1, margin: 1, shell: false };
+/// assert_eq!(active_sites(&raw, &Activation::default(), &rule, 3)?.len(), 8);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn active_sites(
+    raw: &Tensor,
+    activation: &Activation,
+    rule: &ActiveSetRule,
+    kernel: usize,
+) -> Result<ActiveSites> {
+    let (active, batch, dims) = active_voxels(raw, activation, rule)?;
+    Ok(ActiveSites::new(batch, dims, kernel, &active)?)
+}
+
+/// Whether each voxel of the raw volumes `(B, 4, D, H, W)` is active under `rule`, flattened,
+/// with `B` and `[D, H, W]`.
+fn active_voxels(
+    raw: &Tensor,
+    activation: &Activation,
+    rule: &ActiveSetRule,
+) -> Result<(Vec<bool>, usize, [usize; 3])> {
     let (batch, channels, d, h, w) = raw.dims5()?;
     if channels == 0 {
         return Err(invalid("volume", "has no density channel"));
@@ -78,7 +118,7 @@ pub fn active_mask(raw: &Tensor, activation: &Activation, rule: &ActiveSetRule) 
         .flatten_all()?
         .to_vec1()?;
     let voxels = d * h * w;
-    let mut mask = Vec::with_capacity(batch * voxels);
+    let mut active = Vec::with_capacity(batch * voxels);
     for volume in density.chunks_exact(voxels) {
         let occupied: Vec<bool> = volume.iter().map(|&v| v > raw_threshold).collect();
         let near_matter = dilate(&occupied, [d, h, w], rule.margin);
@@ -88,13 +128,7 @@ pub fn active_mask(raw: &Tensor, activation: &Activation, rule: &ActiveSetRule) 
         } else {
             vec![true; voxels]
         };
-        mask.extend(near_matter.into_iter().zip(near_air).map(|(matter, air)| {
-            if matter && air {
-                1f32
-            } else {
-                0.0
-            }
-        }));
+        active.extend(near_matter.into_iter().zip(near_air).map(|(m, a)| m && a));
     }
-    Ok(Tensor::from_vec(mask, (batch, 1, d, h, w), raw.device())?)
+    Ok((active, batch, [d, h, w]))
 }

@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
 use candle_nn::{Module, VarBuilder, VarMap};
-use patch_gan::{ActiveSites, Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
+use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
 use radiance_volume::{resample_tensor, GridDims};
 
-use crate::active_set::active_mask;
+use crate::active_set::active_sites;
 use crate::config::TrainConfig;
 use crate::error::{invalid, Result};
 use crate::noise::gaussian_volume;
@@ -331,12 +331,12 @@ impl SinGrav {
         let up = self.upsample_to_scale(prev, n)?;
         match self.config.sparse_from_scale {
             Some(from) if n >= from => {
-                let mask = active_mask(
+                let sites = Arc::new(active_sites(
                     &up,
                     &self.config.activation(),
                     &self.config.active_set_rule(),
-                )?;
-                let sites = Arc::new(ActiveSites::from_mask(&mask, generator.config().kernel)?);
+                    generator.config().kernel,
+                )?);
                 Ok(generator.forward_residual_active(z, &up, &sites, true)?)
             }
             _ => Ok(generator.forward_residual(z, &up, true)?),

@@ -14,23 +14,7 @@ use crate::storage::{self, Kernel};
 /// The values of `volumes` `(B, C, D, H, W)` at the active sites, as `(1, C, M, 1, 1)`.
 /// Differentiable (to any order): the gradient is scattered back to the sites' voxels.
 pub fn gather(volumes: &Tensor, sites: &Arc<ActiveSites>) -> Result<Tensor> {
-    let (batch, _, d, h, w) = volumes.dims5().map_err(|_| {
-        invalid(
-            "gathered volumes",
-            format!("expected (B, C, D, H, W), got {:?}", volumes.shape()),
-        )
-    })?;
-    if batch != sites.batch() || [d, h, w] != sites.dims() {
-        return Err(invalid(
-            "gathered volumes",
-            format!(
-                "{:?} do not match the active set's {} volumes of {:?}",
-                volumes.shape(),
-                sites.batch(),
-                sites.dims()
-            ),
-        ));
-    }
+    sites.check_volumes("gathered volumes", volumes)?;
     Ok(volumes
         .contiguous()?
         .apply_op1(Move(Arc::clone(sites), Direction::Gather))?)

@@ -195,6 +195,25 @@ impl ActiveSites {
         &self.sites
     }
 
+    /// Errors, naming `what`, unless `volumes` is `(B, C, D, H, W)` with this set's batch and
+    /// volume size.
+    pub(crate) fn check_volumes(&self, what: &'static str, volumes: &Tensor) -> Result<()> {
+        let fits =
+            matches!(volumes.dims(), &[b, _, d, h, w] if b == self.batch && [d, h, w] == self.dims);
+        if fits {
+            return Ok(());
+        }
+        Err(invalid(
+            what,
+            format!(
+                "{:?} do not match the active set's {} volumes of {:?} (expected (B, C, D, H, W))",
+                volumes.shape(),
+                self.batch,
+                self.dims
+            ),
+        ))
+    }
+
     /// The set as a mask `(B, 1, D, H, W)` of `dtype` on `device`: 1 at the active sites, 0
     /// elsewhere.
     ///
