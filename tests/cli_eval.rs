@@ -41,6 +41,56 @@ fn number_after(text: &str, label: &str) -> f64 {
         .unwrap_or_else(|| panic!("no number in `{line}`"))
 }
 
+/// The mean over every frame of `data` of the PSNR (f64) of `volume` rendered at the dataset's
+/// resolution over white, with the renderer called directly (two samples per voxel crossed,
+/// as `volgen fit` scores its volumes; no empty-space skipping).
+fn volume_psnr_by_hand(volume: &Path, data: &Path) -> f64 {
+    use volrender::{render, Rays, RenderConfig, Sampler};
+    let volume = radiance_volume::RadianceVolume::load_safetensors(volume).unwrap();
+    let dataset = singrav::dataset::Dataset::load(data, [1.0; 3]).unwrap();
+    let level = dataset
+        .level(dataset.width(), dataset.height(), &Device::Cpu)
+        .unwrap();
+    let config = RenderConfig::default()
+        .with_sampler(Sampler::PerVoxel { per_voxel: 2 })
+        .with_skip_empty(false)
+        .with_background([1.0; 3])
+        .with_aabb(volume.aabb());
+    let psnr: Vec<f64> = level
+        .cameras
+        .iter()
+        .enumerate()
+        .map(|(i, camera)| {
+            let rgb: Vec<f32> = render(volume.tensor(), &Rays::from_camera(camera), &config)
+                .unwrap()
+                .rgb
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap();
+            // (3, H, W) -> (H, W, 3), as the renderer lays out its rays' colours.
+            let real: Vec<f32> = level
+                .images
+                .get(i)
+                .unwrap()
+                .permute((1, 2, 0))
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap();
+            let mse = rgb
+                .iter()
+                .zip(&real)
+                .map(|(a, b)| (f64::from(*a) - f64::from(*b)).powi(2))
+                .sum::<f64>()
+                / rgb.len() as f64;
+            -10.0 * mse.log10()
+        })
+        .collect();
+    psnr.iter().sum::<f64>() / psnr.len() as f64
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -106,6 +156,27 @@ fn eval_reports_diversity_and_with_weights_sifid() {
     let first_and_fourth = serde_json::json!(["images/r_000.png", "images/r_003.png"]);
     assert_eq!(report["views"], first_and_fourth);
     assert_eq!(report["reconstruction_views"], first_and_fourth);
+
+    // V*'s own volume, as `volgen sample --reconstruction` writes it, scored independently.
+    let v_star = tmp.path().join("v_star");
+    ok(&volgen(&[
+        "sample",
+        path(&run),
+        "--count",
+        "0",
+        "--reconstruction",
+        "--out",
+        path(&v_star),
+    ]));
+    let volume_psnr = report["volume_psnr"].as_f64().unwrap();
+    let expected = volume_psnr_by_hand(&v_star.join("reconstruction.safetensors"), &data);
+    assert!(
+        (volume_psnr - expected).abs() < 1e-3,
+        "eval {volume_psnr} dB, by hand {expected} dB"
+    );
+    assert_eq!(report["volume_views"], 6, "every training view");
+    assert!((number_after(&text, "volume_psnr:") - volume_psnr).abs() <= 5e-3);
+    assert!(report["held_out_volume_psnr"].is_null());
 
     let weights = tmp.path().join("inception.safetensors");
     write_random_inception(&weights);
@@ -199,17 +270,23 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
             .collect()
     };
     let (plain, holdout) = (cells(lines[2]), cells(lines[3]));
-    assert_eq!(plain.len(), 11, "{text}");
+    assert_eq!(plain.len(), 12, "{text}");
     assert_eq!(plain[0], path(&run));
     assert_eq!(holdout[0], path(&held));
     // No held-out views and no SIFID-MV in the plain run: dashes.
     assert_eq!(
-        (plain[4].as_str(), plain[5].as_str(), plain[10].as_str()),
+        (plain[5].as_str(), plain[6].as_str(), plain[11].as_str()),
         ("-", "-", "-")
     );
-    assert_eq!(holdout[4], format!("{held_psnr:.2}"));
+    assert_eq!(holdout[5], format!("{held_psnr:.2}"));
+    // V*'s volume over the 4 training and, separately, the 2 held-out frames.
+    let volume_psnr = report["volume_psnr"].as_f64().unwrap();
+    assert_eq!(holdout[4], format!("{volume_psnr:.2}"));
+    assert_eq!(report["volume_views"], 4);
+    let held_volume = report["held_out_volume_psnr"].as_f64().unwrap();
+    assert!(held_volume > 5.0 && held_volume < 40.0, "{held_volume}");
     assert_eq!(
-        (holdout[6].as_str(), plain[6] != "-"),
+        (holdout[7].as_str(), plain[7] != "-"),
         ("-", true),
         "{text}"
     );

@@ -10,10 +10,12 @@ use super::model_io::load_model;
 use super::train::{device, load_dataset};
 use anyhow::{ensure, Context, Result};
 use candle_core::{Device, Tensor};
+use radiance_volume::RadianceVolume;
 use rand::SeedableRng;
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
 use singrav::dataset::{Dataset, DepthKind};
+use singrav::fit::{view_psnr, FitConfig};
 use singrav::metrics::{
     colour_swd, depth_rmse, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv,
     InceptionBlock1, PATCH_SWD_MIN_SIDE,
@@ -86,6 +88,14 @@ struct Evaluation {
     held_out_psnr: Option<f64>,
     held_out_ssim: Option<f64>,
     held_out_depth_rmse: Option<f64>,
+    /// dB: V* itself, the finest 3D scale's volume (what `volgen sample --reconstruction`
+    /// writes), rendered from every training view at the dataset's resolution as `volgen fit`
+    /// measures its volumes, so the two compare on equal terms (no upsampler).
+    volume_psnr: f64,
+    /// How many training views `volume_psnr` averages.
+    volume_views: usize,
+    /// The same over every held-out view (null without a holdout).
+    held_out_volume_psnr: Option<f64>,
     /// Lower is closer to the real views' patch statistics; null for views too small for its
     /// pyramid.
     patch_swd_mv: Option<f64>,
@@ -160,11 +170,11 @@ fn evaluate(
     device: &Device,
 ) -> Result<Evaluation> {
     let model = load_model(model_path)?;
-    let dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
+    let scene_dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
     // The model renders in its own cube: a run trained with --bounds sees the views there.
     let dataset = match &model.config().bounds {
-        Some(bounds) => dataset.in_model_cube(bounds)?,
-        None => dataset,
+        Some(bounds) => scene_dataset.in_model_cube(bounds)?,
+        None => scene_dataset.clone(),
     };
     ensure!(
         args.views <= dataset.len(),
@@ -199,6 +209,12 @@ fn evaluate(
                 device,
             )
         })
+        .transpose()?;
+    // In the scene's coordinates, where `to_physical` puts the volume.
+    let v_star_volume = model.to_physical(&v_star)?;
+    let training_volume_psnr = volume_psnr(&model, &v_star_volume, &scene_dataset, &training)?;
+    let held_out_volume_psnr = (!held_out.is_empty())
+        .then(|| volume_psnr(&model, &v_star_volume, &scene_dataset, &held_out))
         .transpose()?;
 
     let all: Vec<usize> = (0..dataset.len()).collect();
@@ -237,6 +253,9 @@ fn evaluate(
         held_out_psnr: held.as_ref().map(|h| h.psnr),
         held_out_ssim: held.as_ref().map(|h| h.ssim),
         held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
+        volume_psnr: training_volume_psnr,
+        volume_views: training.len(),
+        held_out_volume_psnr,
         patch_swd_mv: (image_size >= PATCH_SWD_MIN_SIDE)
             .then(|| patch_swd_mv(&views, &real))
             .transpose()?,
@@ -270,6 +289,23 @@ fn fit(
     })
 }
 
+/// The mean colour PSNR of the physical `volume` rendered from every view `frames` of `dataset`
+/// at the dataset's resolution, as `volgen fit` reports its volumes (the same renderer and
+/// sampling), on the model's background.
+fn volume_psnr(
+    model: &SinGrav,
+    volume: &RadianceVolume,
+    dataset: &Dataset,
+    frames: &[usize],
+) -> Result<f64> {
+    let config = FitConfig {
+        background: model.config().background,
+        ..FitConfig::default()
+    };
+    let per_view = view_psnr(volume, dataset, frames, &config)?;
+    Ok(per_view.iter().sum::<f64>() / per_view.len() as f64)
+}
+
 /// `count` of `indices` evenly spaced (all of them when there are fewer).
 fn spread(indices: &[usize], count: usize) -> Vec<usize> {
     let count = count.min(indices.len());
@@ -301,6 +337,14 @@ fn print_report(e: &Evaluation) {
         "reconstruction_depth_rmse: {:.4}  (world units; lower = closer)",
         e.reconstruction_depth_rmse
     );
+    println!(
+        "volume_psnr:               {:.2} dB  (V*'s volume on all {} training views, as `volgen \
+         fit` scores its volumes)",
+        e.volume_psnr, e.volume_views
+    );
+    if let Some(psnr) = e.held_out_volume_psnr {
+        println!("held_out_volume_psnr:      {psnr:.2} dB");
+    }
     match (e.held_out_psnr, e.held_out_ssim, e.held_out_depth_rmse) {
         (Some(psnr), Some(ssim), Some(depth)) => {
             println!(
@@ -355,15 +399,16 @@ fn markdown_table(evaluations: &[Evaluation]) -> String {
         None => "-".to_string(),
     };
     let mut table = String::from(
-        "| run | PSNR (dB) | SSIM | depth RMSE | held-out PSNR | held-out SSIM | patch SWD-MV | \
-         colour SWD | floaters | Diversity-MV | SIFID-MV |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
+         patch SWD-MV | colour SWD | floaters | Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
         let cells = [
             number(Some(e.reconstruction_psnr), 2),
             number(Some(e.reconstruction_ssim), 4),
             number(Some(e.reconstruction_depth_rmse), 4),
+            number(Some(e.volume_psnr), 2),
             number(e.held_out_psnr, 2),
             number(e.held_out_ssim, 4),
             number(e.patch_swd_mv, 4),

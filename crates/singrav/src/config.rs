@@ -60,6 +60,12 @@ pub struct TrainConfig {
     pub scale_views: Option<Vec<ScaleViews>>,
     /// Adam learning rate (5e-4) for generators and critics.
     pub learning_rate: f64,
+    /// SinGAN's step decay of the learning rate (its `MultiStepLR`: at 80% of a scale's
+    /// iterations, times 0.1), for the generator and critic of every scale. `None` (also runs
+    /// made before it existed) keeps the rate constant. Written as `null` rather than left out,
+    /// so that `--set lr_decay=...` finds it.
+    #[serde(default)]
+    pub lr_decay: Option<LrDecay>,
     /// Adam betas (0.9, 0.999).
     pub betas: (f64, f64),
     /// WGAN-GP penalty weight (0.1).
@@ -168,6 +174,16 @@ pub enum SwdFeatures {
     /// [`crate::train::RunOptions::vgg19_weights`], not recorded here, so a run can resume
     /// with its weights file moved.
     Vgg19,
+}
+
+/// A step decay of the learning rate within each scale ([`TrainConfig::lr_decay`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LrDecay {
+    /// The fraction of a scale's iterations after which the rate drops, in (0, 1].
+    pub at: f64,
+    /// What the rate is multiplied by, in (0, 1].
+    pub factor: f64,
 }
 
 /// How many views one training step of a scale renders.
@@ -345,6 +361,7 @@ impl TrainConfig {
             views_per_step: 1,
             scale_views: Some(table_views(&PAPER_VIEWS)),
             learning_rate: 5e-4,
+            lr_decay: None,
             betas: (0.9, 0.999),
             gp_weight: 0.1,
             lambda_color: 10.0,
@@ -477,6 +494,31 @@ impl TrainConfig {
     /// If `n` is not a scale of this configuration (see [`TrainConfig::validate`]).
     pub fn scale_schedule(&self, n: usize) -> ScaleSchedule {
         self.schedule[n - 1]
+    }
+
+    /// The learning rate of scale `n` (1-based) at its 0-based `iteration`: `learning_rate`,
+    /// times [`LrDecay::factor`] from [`LrDecay::at`] of the scale's iterations on.
+    ///
+    /// ```
+    /// use singrav::config::{LrDecay, TrainConfig};
+    /// let config = TrainConfig {
+    ///     lr_decay: Some(LrDecay { at: 0.75, factor: 0.1 }),
+    ///     ..TrainConfig::preset("tiny")?
+    /// };
+    /// // tiny's scale 3 runs 120 iterations: the rate drops from iteration 90.
+    /// assert_eq!(config.learning_rate_at(3, 89), 1e-3);
+    /// assert!((config.learning_rate_at(3, 90) - 1e-4).abs() < 1e-12);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn learning_rate_at(&self, n: usize, iteration: usize) -> f64 {
+        match self.lr_decay {
+            Some(decay)
+                if iteration as f64 >= decay.at * self.scale_schedule(n).iterations as f64 =>
+            {
+                self.learning_rate * decay.factor
+            }
+            _ => self.learning_rate,
+        }
     }
 
     /// Iterations of all scales before scale `n` (1-based).
@@ -710,6 +752,14 @@ impl TrainConfig {
                 "must be finite and non-negative (learning rate positive)",
             ));
         }
+        if let Some(LrDecay { at, factor }) = self.lr_decay {
+            if !(at > 0.0 && at <= 1.0 && factor > 0.0 && factor <= 1.0) {
+                return Err(invalid(
+                    "lr_decay",
+                    format!("`at` and `factor` must lie in (0, 1], got at {at}, factor {factor}"),
+                ));
+            }
+        }
         let density_ok = self.density_scale.is_finite()
             && self.density_scale > 0.0
             && self.density_shift.is_finite();
@@ -750,7 +800,7 @@ impl FromStr for TrainConfig {
 
 #[cfg(test)]
 mod tests {
-    use super::{ScaleViews, TrainConfig};
+    use super::{LrDecay, ScaleViews, TrainConfig};
 
     #[test]
     fn runs_saved_before_opacity_supervision_read_as_trained_without_it() {
@@ -905,6 +955,40 @@ mod tests {
         for config in [short, zero] {
             let message = config.validate().unwrap_err().to_string();
             assert!(message.contains("scale_views"), "{message}");
+        }
+    }
+
+    #[test]
+    fn the_learning_rate_decays_where_set_and_bad_decays_are_refused() {
+        let tiny = TrainConfig::preset("tiny").unwrap();
+        assert_eq!(tiny.lr_decay, None);
+        // Runs made before the field existed have none.
+        let mut json = serde_json::to_value(&tiny).unwrap();
+        json.as_object_mut().unwrap().remove("lr_decay");
+        assert_eq!(serde_json::from_value::<TrainConfig>(json).unwrap(), tiny);
+        // Settable by name although absent: written as null.
+        let decayed = tiny
+            .with_setting("lr_decay", r#"{"at": 0.5, "factor": 0.25}"#)
+            .unwrap();
+        decayed.validate().unwrap();
+        // Scale 1 runs 240 iterations, scale 4 80: each decays at its own half.
+        for (n, last_full) in [(1, 119), (4, 39)] {
+            assert_eq!(decayed.learning_rate_at(n, last_full), 1e-3);
+            assert_eq!(decayed.learning_rate_at(n, last_full + 1), 2.5e-4);
+        }
+        for (at, factor) in [
+            (0.0, 0.1),
+            (1.5, 0.1),
+            (0.8, 0.0),
+            (0.8, 2.0),
+            (f64::NAN, 0.1),
+        ] {
+            let bad = TrainConfig {
+                lr_decay: Some(LrDecay { at, factor }),
+                ..decayed.clone()
+            };
+            let message = bad.validate().unwrap_err().to_string();
+            assert!(message.contains("lr_decay"), "{message}");
         }
     }
 }

@@ -105,6 +105,12 @@ impl Adam {
         Ok(())
     }
 
+    /// Sets the learning rate of the steps from now on (a schedule's decay); the moments are
+    /// kept.
+    pub fn set_learning_rate(&mut self, learning_rate: f64) {
+        self.learning_rate = learning_rate;
+    }
+
     /// The number of steps taken.
     pub fn steps(&self) -> usize {
         self.steps

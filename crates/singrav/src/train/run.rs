@@ -221,6 +221,11 @@ pub fn train(
             if options.poison == Some((n, it)) {
                 poison(&model, n)?;
             }
+            // A function of the iteration alone, so a resumed run decays where it would have.
+            let learning_rate = config.learning_rate_at(n, it);
+            let (critic, generator_opt) = stage.parts();
+            critic.opt.set_learning_rate(learning_rate);
+            generator_opt.set_learning_rate(learning_rate);
             let losses = stage
                 .iteration(
                     it >= schedule.reconstruction_only,
