@@ -234,8 +234,11 @@ fn check_against_dense(
             continue;
         }
         let diff = max_rel_diff(&actual_values, &expected_values);
+        // 1e-9, not the values' 1e-10: BatchNorm over one or two active sites divides by a
+        // near-zero spread, which amplifies f64 rounding in the gradients (found by proptest:
+        // 1.1e-10 on a 1 x 5 x 1 volume with a random mask, seed 835).
         assert!(
-            diff < 1e-10,
+            diff < 1e-9,
             "gradient of {name} differs by {diff:e} ({kind:?}, {dims:?})"
         );
         let library = values(library_grads.get(t).unwrap());
