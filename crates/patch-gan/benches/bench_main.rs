@@ -1,3 +1,7 @@
 mod benchmarks;
 
-criterion::criterion_main!(benchmarks::conv3d::benches, benchmarks::critic::benches);
+criterion::criterion_main!(
+    benchmarks::conv3d::benches,
+    benchmarks::critic::benches,
+    benchmarks::upsampler::benches
+);

@@ -5,7 +5,7 @@ use candle_nn::VarBuilder;
 
 use crate::conv::{conv2d, Conv2d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::norm::{leaky_relu, InstanceNorm2d, LEAKY_SLOPE};
+use crate::norm::{InstanceNorm2d, LEAKY_SLOPE};
 
 /// Shape of an [`Upsampler2d`]; the default is the paper's table "G_N": 3 image channels and
 /// widths 32, 16, 8, 8.
@@ -94,27 +94,39 @@ impl Module for Upsampler2d {
         let features = candle_nn::ops::pixel_shuffle(&self.up.forward(xs)?, SCALE)?;
         let mut h = blur(&features)?;
         for conv in &self.blocks {
-            h = leaky_relu(&self.norm.forward(&conv.forward(&h)?)?, LEAKY_SLOPE)?;
+            h = self
+                .norm
+                .forward_activated(&conv.forward(&h)?, LEAKY_SLOPE)?;
         }
         self.tail.forward(&h)? + upsample_bilinear2x(xs)?
     }
 }
 
-/// The fixed 3x3 binomial blur of every channel, replicating edge pixels.
+/// The fixed 3x3 binomial blur of every channel, replicating edge pixels: the separable
+/// `[1 2 1] / 4` along rows, then along columns. Built from shifted copies rather than a
+/// convolution because candle's conv2d backward also computes the (constant) kernel's gradient,
+/// a correlation with an image-sized kernel that cost more than the rest of the upsampler.
 fn blur(xs: &Tensor) -> candle_core::Result<Tensor> {
-    let (n, c, h, w) = xs.dims4()?;
-    let taps = [1.0, 2.0, 1.0];
-    let kernel: Vec<f64> = taps
-        .iter()
-        .flat_map(|a| taps.iter().map(move |b| a * b / 16.0))
-        .collect();
-    let kernel = Tensor::from_vec(kernel, (1, 1, 3, 3), xs.device())?.to_dtype(xs.dtype())?;
-    // Channels go into the batch so one single-channel conv blurs all of them independently.
-    xs.reshape((n * c, 1, h, w))?
-        .pad_with_same(2, 1, 1)?
-        .pad_with_same(3, 1, 1)?
-        .conv2d(&kernel, 0, 1, 1, 1)?
-        .reshape((n, c, h, w))
+    blur_axis(&blur_axis(xs, 2)?, 3)
+}
+
+/// `[1 2 1] / 4` along axis `dim`, indices clamped to the axis.
+fn blur_axis(xs: &Tensor, dim: usize) -> candle_core::Result<Tensor> {
+    let (prev, next) = clamped_neighbours(xs, dim)?;
+    (xs * 0.5)? + ((prev + next)? * 0.25)?
+}
+
+/// `xs` shifted by one along `dim` both ways, `(x[i-1], x[i+1])`, indices clamped to the axis.
+fn clamped_neighbours(xs: &Tensor, dim: usize) -> candle_core::Result<(Tensor, Tensor)> {
+    let n = xs.dim(dim)?;
+    if n == 1 {
+        return Ok((xs.clone(), xs.clone()));
+    }
+    let first = xs.narrow(dim, 0, 1)?;
+    let last = xs.narrow(dim, n - 1, 1)?;
+    let prev = Tensor::cat(&[&first, &xs.narrow(dim, 0, n - 1)?], dim)?;
+    let next = Tensor::cat(&[&xs.narrow(dim, 1, n - 1)?, &last], dim)?;
+    Ok((prev, next))
 }
 
 /// Bilinear x2 upsampling of `(N, C, H, W)` with PyTorch's `align_corners = false` (half-pixel
@@ -135,14 +147,85 @@ pub fn upsample_bilinear2x(xs: &Tensor) -> candle_core::Result<Tensor> {
 /// Doubles axis `dim`: output `2i` is `3/4 x[i] + 1/4 x[i-1]`, output `2i+1` is
 /// `3/4 x[i] + 1/4 x[i+1]`, with indices clamped to the axis.
 fn upsample_axis2x(xs: &Tensor, dim: usize) -> candle_core::Result<Tensor> {
-    let n = xs.dim(dim)?;
-    let first = xs.narrow(dim, 0, 1)?;
-    let last = xs.narrow(dim, n - 1, 1)?;
-    let prev = Tensor::cat(&[&first, &xs.narrow(dim, 0, n - 1)?], dim)?;
-    let next = Tensor::cat(&[&xs.narrow(dim, 1, n - 1)?, &last], dim)?;
+    let (prev, next) = clamped_neighbours(xs, dim)?;
     let even = ((xs * 0.75)? + (prev * 0.25)?)?;
     let odd = ((xs * 0.75)? + (next * 0.25)?)?;
     let mut dims = xs.dims().to_vec();
     dims[dim] *= 2;
     Tensor::stack(&[even, odd], dim + 1)?.reshape(dims)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{Device, Var};
+
+    /// The 3x3 binomial kernel in f64 with indices clamped to the image, as the `(output,
+    /// source, weight)` terms of the sum (the blur gathers along them, its adjoint scatters):
+    /// every pair of a row term and a column term of `[1 2 1] / 4`.
+    fn direct_terms(h: usize, w: usize) -> Vec<(usize, usize, f64)> {
+        let axis = |n: usize| -> Vec<(usize, usize, f64)> {
+            (0..n)
+                .flat_map(|i| {
+                    [
+                        (i.saturating_sub(1), 0.25),
+                        (i, 0.5),
+                        ((i + 1).min(n - 1), 0.25),
+                    ]
+                    .map(|(source, weight)| (i, source, weight))
+                })
+                .collect()
+        };
+        let columns = axis(w);
+        axis(h)
+            .into_iter()
+            .flat_map(|(oi, si, ti)| {
+                columns
+                    .iter()
+                    .map(move |&(oj, sj, tj)| (oi * w + oj, si * w + sj, ti * tj))
+            })
+            .collect()
+    }
+
+    /// A fixed ramp folded into [-1, 1), so the test needs no random generator.
+    fn values(n: usize, salt: usize) -> Vec<f64> {
+        (0..n)
+            .map(|i| ((i * 13 + salt * 7) % 29) as f64 / 14.5 - 1.0)
+            .collect()
+    }
+
+    fn close(got: &[f64], want: &[f64], what: &str) {
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-14, "{what}: {g} vs {w}");
+        }
+    }
+
+    /// Forward against the direct kernel, backward against its adjoint (the terms scattered),
+    /// on sizes including single rows and columns.
+    #[test]
+    fn blur_and_its_gradient_equal_the_direct_kernel_with_clamped_edges() {
+        for (h, w) in [(1, 1), (1, 4), (3, 1), (2, 2), (5, 7)] {
+            let len = 2 * 3 * h * w;
+            let x = values(len, h * 10 + w);
+            let u = values(len, h * 10 + w + 1);
+            let xs = Var::from_vec(x.clone(), (2, 3, h, w), &Device::Cpu).unwrap();
+            let us = Tensor::from_vec(u.clone(), (2, 3, h, w), &Device::Cpu).unwrap();
+            let ys = blur(xs.as_tensor()).unwrap();
+            let grad = (&ys * &us).unwrap().sum_all().unwrap().backward().unwrap();
+            let ours = ys.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+            let ours_grad = grad.get(&xs).unwrap().flatten_all().unwrap();
+            let ours_grad = ours_grad.to_vec1::<f64>().unwrap();
+            let plane = h * w;
+            for p in 0..len / plane {
+                let (mut want, mut want_grad) = (vec![0.0; plane], vec![0.0; plane]);
+                for (o, s, k) in direct_terms(h, w) {
+                    want[o] += k * x[p * plane + s];
+                    want_grad[s] += k * u[p * plane + o];
+                }
+                let at = p * plane..(p + 1) * plane;
+                close(&ours[at.clone()], &want, &format!("{h}x{w} blur"));
+                close(&ours_grad[at], &want_grad, &format!("{h}x{w} gradient"));
+            }
+        }
+    }
 }

@@ -5,8 +5,6 @@
 //! is several times slower on long rows. Other devices and dtypes use candle's kernel. The
 //! values are then gathered, so gradients flow back through the gather.
 
-use std::cmp::Ordering;
-
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Layout, Shape, Tensor, D};
 use rayon::prelude::*;
@@ -56,25 +54,71 @@ impl CustomOp1 for ArgSortPairs {
     }
 }
 
-/// A float with a total order, so the comparison inlines into the sort (a function pointer
-/// would cost an indirect call per comparison).
+/// A float sortable by the bits of its total order: `key` maps it to an unsigned integer
+/// whose order is `total_cmp`'s (negatives below positives, `-0` below `+0`).
 trait SortKey: Copy + Send + Sync {
-    fn total_order(&self, other: &Self) -> Ordering;
+    type Key: RadixKey;
+    fn key(self) -> Self::Key;
 }
 
 impl SortKey for f32 {
-    fn total_order(&self, other: &Self) -> Ordering {
-        self.total_cmp(other)
+    type Key = u32;
+    fn key(self) -> u32 {
+        let bits = self.to_bits();
+        // Negative floats order backwards in their bits: flip them all; positive ones go
+        // above every negative one.
+        if bits >> 31 == 1 {
+            !bits
+        } else {
+            bits | 1 << 31
+        }
     }
 }
 
 impl SortKey for f64 {
-    fn total_order(&self, other: &Self) -> Ordering {
-        self.total_cmp(other)
+    type Key = u64;
+    fn key(self) -> u64 {
+        let bits = self.to_bits();
+        if bits >> 63 == 1 {
+            !bits
+        } else {
+            bits | 1 << 63
+        }
     }
 }
 
+/// An unsigned key the radix sort splits into [`DIGIT_BITS`]-bit digits.
+trait RadixKey: Copy + Ord + Send + Sync {
+    const BITS: u32;
+    fn digit(self, shift: u32) -> usize;
+}
+
+impl RadixKey for u32 {
+    const BITS: u32 = 32;
+    fn digit(self, shift: u32) -> usize {
+        ((self >> shift) as usize) & (RADIX - 1)
+    }
+}
+
+impl RadixKey for u64 {
+    const BITS: u32 = 64;
+    fn digit(self, shift: u32) -> usize {
+        ((self >> shift) as usize) & (RADIX - 1)
+    }
+}
+
+/// Bits per radix digit: 11 sorts an f32 in 3 passes with a 2048-entry count table that
+/// stays in L1.
+const DIGIT_BITS: u32 = 11;
+const RADIX: usize = 1 << DIGIT_BITS;
+
+/// Rows shorter than this are sorted by comparison: the radix sort's count tables cost more
+/// than they save there.
+const RADIX_FROM: usize = 256;
+
 /// Sorts each `row`-long chunk of `values` by (value, index) pairs, in parallel over rows.
+/// Ties keep their index order, so the permutation is unique and independent of the
+/// algorithm chosen for the row's length.
 fn argsort_rows<T: SortKey>(values: &[T], row: usize) -> Vec<u32> {
     let mut order = vec![0u32; values.len()];
     if row == 0 {
@@ -83,15 +127,56 @@ fn argsort_rows<T: SortKey>(values: &[T], row: usize) -> Vec<u32> {
     order
         .par_chunks_mut(row)
         .zip(values.par_chunks(row))
-        .for_each_init(Vec::new, |pairs: &mut Vec<(T, u32)>, (out, vals)| {
-            pairs.clear();
-            pairs.extend(vals.iter().copied().zip(0u32..));
-            pairs.sort_unstable_by(|a, b| a.0.total_order(&b.0));
-            for (o, (_, i)) in out.iter_mut().zip(pairs.iter()) {
-                *o = *i;
-            }
-        });
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(pairs, scratch), (out, vals)| {
+                pairs.clear();
+                pairs.extend(vals.iter().map(|v| v.key()).zip(0u32..));
+                if row < RADIX_FROM {
+                    pairs.sort_unstable();
+                } else {
+                    radix_sort(pairs, scratch);
+                }
+                for (o, (_, i)) in out.iter_mut().zip(pairs.iter()) {
+                    *o = *i;
+                }
+            },
+        );
     order
+}
+
+/// Stable LSD radix sort of `(key, index)` pairs by key; `scratch` is reused between calls.
+/// Digits that are equal in every key (the high bits of values in a narrow range) are
+/// skipped, since such a pass would leave the order unchanged.
+fn radix_sort<K: RadixKey>(pairs: &mut Vec<(K, u32)>, scratch: &mut Vec<(K, u32)>) {
+    let passes = K::BITS.div_ceil(DIGIT_BITS) as usize;
+    // One read of the keys counts the digits of every pass.
+    let mut counts = vec![[0usize; RADIX]; passes];
+    for (key, _) in pairs.iter() {
+        for (pass, count) in counts.iter_mut().enumerate() {
+            count[key.digit(pass as u32 * DIGIT_BITS)] += 1;
+        }
+    }
+    let n = pairs.len();
+    scratch.clear();
+    scratch.resize(n, pairs[0]);
+    for (pass, count) in counts.iter_mut().enumerate() {
+        if count.contains(&n) {
+            continue;
+        }
+        // Counts become each digit's first output slot.
+        let mut next = 0;
+        for c in count.iter_mut() {
+            (*c, next) = (next, next + *c);
+        }
+        let shift = pass as u32 * DIGIT_BITS;
+        for &pair in pairs.iter() {
+            let slot = &mut count[pair.0.digit(shift)];
+            scratch[*slot] = pair;
+            *slot += 1;
+        }
+        std::mem::swap(pairs, scratch);
+    }
 }
 
 #[cfg(test)]
@@ -124,5 +209,65 @@ mod tests {
             sorted.to_vec2::<f32>()?
         );
         Ok(())
+    }
+
+    /// Values with every hard case of a float order: both zeros, infinities, subnormals,
+    /// duplicates, and runs that share high bits.
+    fn awkward_row(len: usize, salt: u64) -> Vec<f64> {
+        let special = [
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e-310,
+            -1e-310,
+            1.0,
+        ];
+        let mut state = salt.wrapping_mul(6_364_136_223_846_793_005) | 1;
+        (0..len)
+            .map(|i| {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                let r = (state >> 11) as f64 / (1u64 << 53) as f64;
+                match i % 5 {
+                    0 => special[(state >> 60) as usize % special.len()],
+                    1 => (r * 8.0).round() - 4.0,
+                    _ => (r - 0.5) * 1e3,
+                }
+            })
+            .collect()
+    }
+
+    /// The radix path and the comparison path give the permutation of a stable sort by
+    /// `total_cmp`, in f32 and f64, on rows below, at and above the radix threshold.
+    #[test]
+    fn argsort_is_the_stable_total_order_on_every_path() {
+        for len in [1, 2, 17, RADIX_FROM - 1, RADIX_FROM, 3000] {
+            for salt in 0..3 {
+                let row64 = awkward_row(len, salt);
+                let row32: Vec<f32> = row64.iter().map(|&v| v as f32).collect();
+                let rows = 2;
+                let values64: Vec<f64> = row64.iter().chain(row64.iter().rev()).copied().collect();
+                let values32: Vec<f32> = row32.iter().chain(row32.iter().rev()).copied().collect();
+                let got64 = argsort_rows(&values64, len);
+                let got32 = argsort_rows(&values32, len);
+                for r in 0..rows {
+                    let span = r * len..(r + 1) * len;
+                    let mut want64: Vec<u32> = (0..len as u32).collect();
+                    want64.sort_by(|&a, &b| {
+                        values64[span.start + a as usize]
+                            .total_cmp(&values64[span.start + b as usize])
+                    });
+                    let mut want32: Vec<u32> = (0..len as u32).collect();
+                    want32.sort_by(|&a, &b| {
+                        values32[span.start + a as usize]
+                            .total_cmp(&values32[span.start + b as usize])
+                    });
+                    assert_eq!(got64[span.clone()], want64[..], "f64 len {len} salt {salt}");
+                    assert_eq!(got32[span], want32[..], "f32 len {len} salt {salt}");
+                }
+            }
+        }
     }
 }

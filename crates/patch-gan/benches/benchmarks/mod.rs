@@ -1,2 +1,3 @@
 pub mod conv3d;
 pub mod critic;
+pub mod upsampler;
