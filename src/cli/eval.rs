@@ -172,10 +172,12 @@ fn evaluate(
     let model = load_model(model_path)?;
     let scene_dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
     // The model renders in its own cube: a run trained with --bounds sees the views there.
-    let dataset = match &model.config().bounds {
-        Some(bounds) => scene_dataset.in_model_cube(bounds)?,
-        None => scene_dataset.clone(),
+    // Kept apart from the scene's copy only when the two differ.
+    let in_cube = match &model.config().bounds {
+        Some(bounds) => Some(scene_dataset.in_model_cube(bounds)?),
+        None => None,
     };
+    let dataset = in_cube.as_ref().unwrap_or(&scene_dataset);
     ensure!(
         args.views <= dataset.len(),
         "--views {} is more than the {} frames of {}",
@@ -195,7 +197,7 @@ fn evaluate(
     let reconstruction = fit(
         &model,
         &v_star,
-        &dataset,
+        dataset,
         &spread(&training, args.views),
         device,
     )?;
@@ -204,7 +206,7 @@ fn evaluate(
             fit(
                 &model,
                 &v_star,
-                &dataset,
+                dataset,
                 &spread(&held_out, args.views),
                 device,
             )

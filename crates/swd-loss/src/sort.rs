@@ -93,19 +93,18 @@ trait RadixKey: Copy + Ord + Send + Sync {
     fn digit(self, shift: u32) -> usize;
 }
 
-impl RadixKey for u32 {
-    const BITS: u32 = 32;
-    fn digit(self, shift: u32) -> usize {
-        ((self >> shift) as usize) & (RADIX - 1)
-    }
+macro_rules! radix_key {
+    ($($int:ty),*) => {$(
+        impl RadixKey for $int {
+            const BITS: u32 = <$int>::BITS;
+            fn digit(self, shift: u32) -> usize {
+                ((self >> shift) as usize) & (RADIX - 1)
+            }
+        }
+    )*};
 }
 
-impl RadixKey for u64 {
-    const BITS: u32 = 64;
-    fn digit(self, shift: u32) -> usize {
-        ((self >> shift) as usize) & (RADIX - 1)
-    }
-}
+radix_key!(u32, u64);
 
 /// Bits per radix digit: 11 sorts an f32 in 3 passes with a 2048-entry count table that
 /// stays in L1.
@@ -128,14 +127,14 @@ fn argsort_rows<T: SortKey>(values: &[T], row: usize) -> Vec<u32> {
         .par_chunks_mut(row)
         .zip(values.par_chunks(row))
         .for_each_init(
-            || (Vec::new(), Vec::new()),
-            |(pairs, scratch), (out, vals)| {
+            || (Vec::new(), Vec::new(), Vec::new()),
+            |(pairs, scratch, counts), (out, vals)| {
                 pairs.clear();
                 pairs.extend(vals.iter().map(|v| v.key()).zip(0u32..));
                 if row < RADIX_FROM {
                     pairs.sort_unstable();
                 } else {
-                    radix_sort(pairs, scratch);
+                    radix_sort(pairs, scratch, counts);
                 }
                 for (o, (_, i)) in out.iter_mut().zip(pairs.iter()) {
                     *o = *i;
@@ -145,13 +144,19 @@ fn argsort_rows<T: SortKey>(values: &[T], row: usize) -> Vec<u32> {
     order
 }
 
-/// Stable LSD radix sort of `(key, index)` pairs by key; `scratch` is reused between calls.
-/// Digits that are equal in every key (the high bits of values in a narrow range) are
-/// skipped, since such a pass would leave the order unchanged.
-fn radix_sort<K: RadixKey>(pairs: &mut Vec<(K, u32)>, scratch: &mut Vec<(K, u32)>) {
+/// Stable LSD radix sort of `(key, index)` pairs by key; `scratch` and `counts` are buffers
+/// reused between calls (a row's indices are `u32`, so are its counts). Digits that are equal
+/// in every key (the high bits of values in a narrow range) are skipped, since such a pass
+/// would leave the order unchanged.
+fn radix_sort<K: RadixKey>(
+    pairs: &mut Vec<(K, u32)>,
+    scratch: &mut Vec<(K, u32)>,
+    counts: &mut Vec<[u32; RADIX]>,
+) {
     let passes = K::BITS.div_ceil(DIGIT_BITS) as usize;
+    counts.clear();
+    counts.resize(passes, [0; RADIX]);
     // One read of the keys counts the digits of every pass.
-    let mut counts = vec![[0usize; RADIX]; passes];
     for (key, _) in pairs.iter() {
         for (pass, count) in counts.iter_mut().enumerate() {
             count[key.digit(pass as u32 * DIGIT_BITS)] += 1;
@@ -161,7 +166,7 @@ fn radix_sort<K: RadixKey>(pairs: &mut Vec<(K, u32)>, scratch: &mut Vec<(K, u32)
     scratch.clear();
     scratch.resize(n, pairs[0]);
     for (pass, count) in counts.iter_mut().enumerate() {
-        if count.contains(&n) {
+        if count.contains(&(n as u32)) {
             continue;
         }
         // Counts become each digit's first output slot.
@@ -172,7 +177,7 @@ fn radix_sort<K: RadixKey>(pairs: &mut Vec<(K, u32)>, scratch: &mut Vec<(K, u32)
         let shift = pass as u32 * DIGIT_BITS;
         for &pair in pairs.iter() {
             let slot = &mut count[pair.0.digit(shift)];
-            scratch[*slot] = pair;
+            scratch[*slot as usize] = pair;
             *slot += 1;
         }
         std::mem::swap(pairs, scratch);

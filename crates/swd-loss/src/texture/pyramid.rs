@@ -178,8 +178,9 @@ impl FeatureExtractor for PatchPyramid {
 /// (constant) kernel, a correlation with an image-sized kernel that cost more than the rest of
 /// the loss.
 fn blur(x: &Tensor, stride: usize) -> Result<Tensor> {
-    let blurred = binomial_axis(&binomial_axis(x, D::Minus2)?, D::Minus1)?;
-    decimate(&decimate(&blurred, D::Minus2, stride)?, D::Minus1, stride)
+    // Rows dropped after the first pass need no second pass.
+    let rows = decimate(&binomial_axis(x, D::Minus2)?, D::Minus2, stride)?;
+    decimate(&binomial_axis(&rows, D::Minus1)?, D::Minus1, stride)
 }
 
 /// `[1 4 6 4 1] / 16` along `dim`, indices clamped to the axis.
