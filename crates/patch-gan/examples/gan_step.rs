@@ -12,8 +12,11 @@
 //! - `generator`: `Generator3d` forward in training mode (BatchNorm on batch statistics) on a
 //!   `(1, in_channels, S, S, S)` normal volume, loss `mean(y^2)`, backward to every weight.
 //! - `critic`: `PatchDiscriminator2d` on `(batch, in_channels, S, S)` uniform images; loss
-//!   `critic_loss(D(real), D(fake)) + gradient_penalty(...)` (per-pixel norm, weight 0.1), whose
-//!   backward is second order into the critic's weights.
+//!   `D.critic_loss(real, fake) + D.gradient_penalty(...)` (per-pixel norm, weight 0.1): real
+//!   and fake through one forward pass, the penalty's gradient into the critic's weights written
+//!   as a first-order graph; `--double-backward` takes the generic functions instead
+//!   (`critic_loss(D(real), D(fake)) + gradient_penalty(&D, ...)`, candle's double backward), as
+//!   before the critic had its own.
 //! - `gemm`: one `S x S x S` f32 product by the `gemm` crate (the kernels' multiplier) on the same
 //!   threads: the machine's rate to hold the steps' GFLOP/s against.
 //!
@@ -50,6 +53,7 @@ struct Args {
     threads: usize,
     repeat: usize,
     mallopt: bool,
+    double_backward: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -74,10 +78,15 @@ fn parse_args() -> Result<Args, String> {
         threads: 2,
         repeat: 5,
         mallopt: true,
+        double_backward: false,
     };
     while let Some(flag) = argv.next() {
         if flag == "--no-mallopt" {
             args.mallopt = false;
+            continue;
+        }
+        if flag == "--double-backward" {
+            args.double_backward = true;
             continue;
         }
         let value = argv
@@ -177,9 +186,13 @@ fn generator_step(a: &Args) -> candle_core::Result<Box<dyn FnMut() -> candle_cor
 }
 
 fn critic_step(a: &Args) -> candle_core::Result<Box<dyn FnMut() -> candle_core::Result<()>>> {
-    // The penalty differentiates the critic's input gradient: candle must keep that graph.
-    // SAFETY: set before any backward pass, while this program runs no other threads.
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
+    let double_backward = a.double_backward;
+    if double_backward {
+        // The generic penalty differentiates the critic's input gradient: candle must keep
+        // that graph.
+        // SAFETY: set before any backward pass, while this program runs no other threads.
+        unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
+    }
     let dev = Device::Cpu;
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
@@ -195,10 +208,19 @@ fn critic_step(a: &Args) -> candle_core::Result<Box<dyn FnMut() -> candle_core::
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     Ok(Box::new(move || {
         let wrap = candle_core::Error::wrap;
-        let penalty = gradient_penalty(&d, &real, &fake, GradientPenalty::default(), &mut rng)
-            .map_err(wrap)?;
-        let adversarial =
-            critic_loss(&d.forward_t(&real, true)?, &d.forward_t(&fake, true)?).map_err(wrap)?;
+        let cfg = GradientPenalty::default();
+        let penalty = if double_backward {
+            gradient_penalty(&d, &real, &fake, cfg, &mut rng)
+        } else {
+            d.gradient_penalty(&real, &fake, cfg, &mut rng)
+        }
+        .map_err(wrap)?;
+        let adversarial = if double_backward {
+            critic_loss(&d.forward_t(&real, true)?, &d.forward_t(&fake, true)?)
+        } else {
+            d.critic_loss(&real, &fake)
+        }
+        .map_err(wrap)?;
         drop((adversarial + penalty)?.backward()?);
         Ok(())
     }))
@@ -247,6 +269,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a = parse_args()?;
     // As the `volgen` binary does (see its doc).
     let mallopt = a.mallopt && volrender::tune_malloc();
+    // As the `volgen` binary does: candle's pool worker parks right after each element-wise op
+    // instead of spinning on a core the convolutions need (unless the caller set a limit).
+    // SAFETY: set before any thread of this program exists.
+    if std::env::var_os("CANDLE_BARRIER_POOL_SPIN_LIMIT").is_none() {
+        unsafe { std::env::set_var("CANDLE_BARRIER_POOL_SPIN_LIMIT", "1") };
+    }
     // candle sizes its own parallel loops from the variable rayon reads.
     // SAFETY: set before any thread of this program exists.
     unsafe { std::env::set_var("RAYON_NUM_THREADS", a.threads.to_string()) };
@@ -277,7 +305,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "{{\"what\": \"{what}\", \"size\": {}, \"channels\": {}, \"layers\": {}, \"in_channels\": {}, \
          \"batch\": {}, \"threads\": {}, \"volgen\": \"{}\", \"seconds\": {median:.5}, \
-         \"min_seconds\": {min:.5}, \"gflop\": {gflop:.3}, \"gflops\": {:.1}, \"mallopt\": {mallopt}}}",
+         \"min_seconds\": {min:.5}, \"gflop\": {gflop:.3}, \"gflops\": {:.1}, \"mallopt\": {mallopt}, \
+         \"double_backward\": {}}}",
         a.size,
         a.channels,
         a.layers,
@@ -286,6 +315,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         a.threads,
         env!("CARGO_PKG_VERSION"),
         gflop / median,
+        a.double_backward,
     );
     Ok(())
 }

@@ -2,11 +2,13 @@
 
 use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;
+use rand::Rng;
 
 use crate::conv::{conv2d, op, Conv2d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::fused::bias_leaky_relu;
+use crate::fused::{bias_leaky_relu, leaky_grad};
 use crate::norm::{leaky_relu, LEAKY_SLOPE};
+use crate::wgan::{mixed_images, penalty_of_gradient, GradientPenalty};
 
 /// Kernel size of every discriminator layer.
 const KERNEL: usize = 3;
@@ -143,17 +145,145 @@ impl PatchDiscriminator2d {
     }
 }
 
-impl Module for PatchDiscriminator2d {
-    fn forward(&self, xs: &Tensor) -> candle_core::Result<Tensor> {
+impl PatchDiscriminator2d {
+    /// The critic's WGAN loss [`critic_loss`](crate::critic_loss)`(D(real), D(fake))`, i.e.
+    /// `mean(D(fake)) - mean(D(real))` over all patches, with both batches through one forward
+    /// pass (half the convolution calls, each on twice the images). `real` and `fake` may hold
+    /// different numbers of images of the same channels and size.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Module, Tensor};
+    /// use candle_nn::{VarBuilder, VarMap};
+    /// use patch_gan::{critic_loss, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+    /// let varmap = VarMap::new();
+    /// let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
+    /// let d = PatchDiscriminator2d::new(&PatchDiscriminator2dConfig::default().with_layers(3), vb)?;
+    /// let real = Tensor::rand(0f64, 1., (2, 4, 12, 12), &Device::Cpu)?;
+    /// let fake = Tensor::rand(0f64, 1., (3, 4, 12, 12), &Device::Cpu)?;
+    /// let joint = d.critic_loss(&real, &fake)?.to_scalar::<f64>()?;
+    /// let apart = critic_loss(&d.forward(&real)?, &d.forward(&fake)?)?.to_scalar::<f64>()?;
+    /// assert!((joint - apart).abs() < 1e-12);
+    /// # Ok::<(), patch_gan::Error>(())
+    /// ```
+    pub fn critic_loss(&self, real: &Tensor, fake: &Tensor) -> Result<Tensor> {
+        let (n_real, n_fake) = (real.dim(0)?, fake.dim(0)?);
+        if real.rank() != 4 || real.dims()[1..] != fake.dims()[1..] || n_real * n_fake == 0 {
+            return Err(invalid(
+                "critic loss inputs",
+                format!(
+                    "real {:?} and fake {:?} must be non-empty (N, C, H, W) batches of the same \
+                     C, H, W",
+                    real.shape(),
+                    fake.shape()
+                ),
+            ));
+        }
+        let maps = self.forward(&Tensor::cat(&[real, fake], 0)?)?;
+        let patches = maps.elem_count() / (n_real + n_fake);
+        // Each patch's weight in the loss: -1 / (its batch's patches) for real, + for fake.
+        let weights: Vec<f64> = (0..n_real + n_fake)
+            .map(|i| {
+                if i < n_real {
+                    -1.0 / (n_real * patches) as f64
+                } else {
+                    1.0 / (n_fake * patches) as f64
+                }
+            })
+            .collect();
+        let weights = Tensor::from_vec(weights, (n_real + n_fake, 1, 1, 1), maps.device())?
+            .to_dtype(maps.dtype())?;
+        Ok(maps.broadcast_mul(&weights)?.sum_all()?)
+    }
+
+    /// The WGAN-GP gradient penalty of this critic, the same value as
+    /// [`gradient_penalty`](crate::gradient_penalty)`(self, ...)` (same draws from `rng`, same
+    /// norm and weight), built as a first-order graph in the weights, so it needs neither
+    /// `CANDLE_GRAD_DO_NOT_DETACH` nor candle's second-order bookkeeping.
+    ///
+    /// The critic is piecewise linear: its input gradient at the mixed images is
+    /// `W_1^T M_1 W_2^T ... M_{L-1} W_L^T 1`, with `M_k` the LeakyReLU slopes of layer `k` at those
+    /// images, which do not change under a small change of the weights (nor do the biases enter
+    /// it). So the forward pass runs on constants and only records the slopes, and the gradient
+    /// is written as a chain of transposed convolutions whose backward pass is the penalty's
+    /// exact gradient: a forward convolution and a kernel gradient per layer, where the generic
+    /// double backward also computes the unused weight and bias gradients of the first backward.
+    /// On other devices than the CPU it is the generic function.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use candle_nn::{VarBuilder, VarMap};
+    /// use patch_gan::{GradientPenalty, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+    /// use rand::SeedableRng;
+    /// let varmap = VarMap::new();
+    /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+    /// let critic = PatchDiscriminator2d::new(&PatchDiscriminator2dConfig::default().with_layers(3), vb)?;
+    /// let real = Tensor::rand(0f32, 1., (2, 4, 12, 12), &Device::Cpu)?;
+    /// let fake = Tensor::rand(0f32, 1., (2, 4, 12, 12), &Device::Cpu)?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let gp = critic.gradient_penalty(&real, &fake, GradientPenalty::default(), &mut rng)?;
+    /// let grads = gp.backward()?;
+    /// let data = varmap.data().lock().unwrap();
+    /// let weights: Vec<_> = data.iter().filter(|(name, _)| name.ends_with("weight")).collect();
+    /// assert_eq!(weights.len(), 3);
+    /// assert!(weights.iter().all(|(_, v)| grads.get(v).is_some()));
+    /// # Ok::<(), patch_gan::Error>(())
+    /// ```
+    pub fn gradient_penalty<R: Rng + ?Sized>(
+        &self,
+        real: &Tensor,
+        fake: &Tensor,
+        penalty: GradientPenalty,
+        rng: &mut R,
+    ) -> Result<Tensor> {
+        if !real.device().is_cpu() {
+            return crate::wgan::gradient_penalty(self, real, fake, penalty, rng);
+        }
+        let mixed = mixed_images(real, fake, rng)?;
+        self.check_input(&mixed)?;
+        // Each hidden layer's input dims and output (whose sign is the LeakyReLU branch).
+        let mut layers = Vec::with_capacity(self.blocks.len());
+        let mut x = mixed;
+        for conv in &self.blocks {
+            let convolved = op::conv2d(&x, &conv.weight().detach(), conv.config())?;
+            let y = match conv.bias() {
+                Some(bias) => bias_leaky_relu(&convolved, &bias.detach(), LEAKY_SLOPE)?,
+                None => leaky_relu(&convolved, LEAKY_SLOPE)?,
+            };
+            layers.push((x.dims4()?, y.clone()));
+            x = y;
+        }
+        let (n, _, h, w) = x.dims4()?;
+        let cfg = self.tail.config();
+        let (_, _, kh, kw) = self.tail.weight().dims4()?;
+        let out_side = |side: usize, k: usize| (side + 2 * cfg.padding - k) / cfg.stride + 1;
+        let out_dims = (n, 1, out_side(h, kh), out_side(w, kw));
+        // d sum(D) / d (tail output) is all ones.
+        let ones = Tensor::ones(out_dims, x.dtype(), x.device())?;
+        let mut grad = op::conv2d_grad_input(&ones, self.tail.weight(), cfg, x.dims4()?)?;
+        for (conv, (input_dims, output)) in self.blocks.iter().zip(layers).rev() {
+            let pre = leaky_grad(&grad, &output, LEAKY_SLOPE)?;
+            grad = op::conv2d_grad_input(&pre, conv.weight(), conv.config(), input_dims)?;
+        }
+        penalty_of_gradient(&grad, penalty)
+    }
+
+    /// Errors unless `xs` is at least the receptive field along both axes.
+    fn check_input(&self, xs: &Tensor) -> Result<()> {
         let (_, _, h, w) = xs.dims4()?;
         let field = self.config.receptive_field();
         if h < field || w < field {
             return Err(invalid(
                 "PatchDiscriminator2d input",
                 format!("{h}x{w} is smaller than the receptive field {field}"),
-            )
-            .into());
+            ));
         }
+        Ok(())
+    }
+}
+
+impl Module for PatchDiscriminator2d {
+    fn forward(&self, xs: &Tensor) -> candle_core::Result<Tensor> {
+        self.check_input(xs)?;
         let mut x = xs.clone();
         for conv in &self.blocks {
             let convolved = op::conv2d(&x, conv.weight(), conv.config())?;

@@ -78,7 +78,9 @@ const NORM_EPS: f64 = 1e-12;
 /// second-order gradients. candle keeps backward graphs only when the environment variable
 /// `CANDLE_GRAD_DO_NOT_DETACH` is set (non-empty, not `0`) before the thread's first backward
 /// pass; this function returns [`Error::SecondOrderDisabled`] when it is not set rather than a
-/// silently wrong gradient. Set it at program start.
+/// silently wrong gradient. Set it at program start. For the crate's own critic,
+/// [`PatchDiscriminator2d::gradient_penalty`](crate::PatchDiscriminator2d::gradient_penalty)
+/// gives the same penalty as a first-order graph: faster, and without the variable.
 ///
 /// ```
 /// use candle_core::{DType, Device, Tensor};
@@ -114,6 +116,23 @@ pub fn gradient_penalty<C: Module + ?Sized, R: Rng + ?Sized>(
     if !second_order_enabled() {
         return Err(Error::SecondOrderDisabled);
     }
+    // A fresh leaf, so the backward pass below reports the gradient with respect to it.
+    let mixed = Var::from_tensor(&mixed_images(real, fake, rng)?)?;
+    let grads = critic.forward(mixed.as_tensor())?.sum_all()?.backward()?;
+    let grad = match grads.get(mixed.as_tensor()) {
+        Some(g) => g.clone(),
+        None => mixed.as_tensor().zeros_like()?,
+    };
+    penalty_of_gradient(&grad, penalty)
+}
+
+/// `a real + (1 - a) fake` with one `a ~ U[0, 1)` per image drawn from `rng`, detached; errors
+/// unless `real` and `fake` are equal batched shapes.
+pub(crate) fn mixed_images<R: Rng + ?Sized>(
+    real: &Tensor,
+    fake: &Tensor,
+    rng: &mut R,
+) -> Result<Tensor> {
     if real.shape() != fake.shape() || real.rank() < 2 {
         return Err(invalid(
             "gradient penalty inputs",
@@ -130,13 +149,12 @@ pub fn gradient_penalty<C: Module + ?Sized, R: Rng + ?Sized>(
     alpha_shape[0] = n;
     let alpha = Tensor::from_vec(alphas, alpha_shape, real.device())?.to_dtype(real.dtype())?;
     let mixed = (real.broadcast_mul(&alpha)? + fake.broadcast_mul(&alpha.affine(-1.0, 1.0)?)?)?;
-    // A fresh leaf, so the backward pass below reports the gradient with respect to it.
-    let mixed = Var::from_tensor(&mixed.detach())?;
-    let grads = critic.forward(mixed.as_tensor())?.sum_all()?.backward()?;
-    let grad = match grads.get(mixed.as_tensor()) {
-        Some(g) => g.clone(),
-        None => mixed.as_tensor().zeros_like()?,
-    };
+    Ok(mixed.detach())
+}
+
+/// `weight * mean((||grad|| - 1)^2)` of the critic's input gradient `grad`, the norm taken as
+/// `penalty.norm` says.
+pub(crate) fn penalty_of_gradient(grad: &Tensor, penalty: GradientPenalty) -> Result<Tensor> {
     let sq = grad.sqr()?;
     let norms = match penalty.norm {
         GradientNorm::PerPixel => sq.sum_keepdim(1)?,

@@ -1,15 +1,16 @@
-//! WGAN-GP: loss values, and the penalty's second-order gradient against finite differences.
+//! WGAN-GP: loss values, the penalty's second-order gradient against finite differences, and
+//! the critic's first-order penalty against it.
 //!
 //! Every test sets `CANDLE_GRAD_DO_NOT_DETACH` first: candle reads it once per thread, and each
 //! test runs on its own thread.
 
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{
     critic_loss, generator_loss, gradient_penalty, GradientNorm, GradientPenalty,
-    PatchDiscriminator2d, PatchDiscriminator2dConfig,
+    PatchDiscriminator2d,
 };
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 fn enable_second_order() {
@@ -17,12 +18,9 @@ fn enable_second_order() {
     unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
 }
 
-fn random(shape: &[usize], seed: u64) -> Tensor {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n = shape.iter().product();
-    let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
-}
+mod common;
+use common::penalty as support;
+use common::{max_abs, max_abs_diff, random};
 
 #[test]
 fn losses_are_wasserstein_estimates() {
@@ -63,106 +61,106 @@ fn penalty_of_a_linear_critic_is_known() {
     assert!((gp.to_scalar::<f64>().unwrap() - 2.0 * (norm - 1.0).powi(2)).abs() < 1e-9);
 }
 
-/// Penalty as a function of the critic's weights, with the interpolation drawn from a fixed seed.
+/// The generic penalty as a function of the critic's weights, with the interpolation drawn
+/// from a fixed seed.
 fn penalty(
     critic: &PatchDiscriminator2d,
     real: &Tensor,
     fake: &Tensor,
     cfg: GradientPenalty,
 ) -> Tensor {
-    let mut rng = ChaCha8Rng::seed_from_u64(42);
+    enable_second_order();
+    let mut rng = ChaCha8Rng::seed_from_u64(support::PENALTY_SEED);
     gradient_penalty(critic, real, fake, cfg, &mut rng).unwrap()
 }
 
 #[test]
 fn penalty_gradient_matches_finite_differences() {
     // Three channels run every layer on the im2col kernel; every weight is checked.
-    penalty_gradient_matches_finite_differences_for(
-        PatchDiscriminator2dConfig {
-            layers: 2,
-            channels: 3,
-            in_channels: 2,
-        },
-        1,
-    );
+    support::penalty_gradient_matches_finite_differences(support::SMALL_CRITIC, 1, penalty);
 }
 
 #[test]
 fn penalty_gradient_matches_finite_differences_through_winograd() {
     // 32 channels in and out send the middle layer through the Winograd kernel; every 97th
     // weight is checked (all 10k would take minutes).
-    penalty_gradient_matches_finite_differences_for(
-        PatchDiscriminator2dConfig {
-            layers: 3,
-            channels: 32,
-            in_channels: 2,
-        },
-        97,
-    );
+    support::penalty_gradient_matches_finite_differences(support::WIDE_CRITIC, 97, penalty);
 }
 
-/// Checks every `stride`-th entry of every weight and bias.
-fn penalty_gradient_matches_finite_differences_for(cfg: PatchDiscriminator2dConfig, stride: usize) {
+/// The first-order penalty against the double backward: the same value and the same gradient
+/// for every weight (to rounding, in f64), and no bias gradient from either, with the im2col
+/// and the Winograd kernels and both norms.
+#[test]
+fn first_order_penalty_equals_the_double_backward() {
     enable_second_order();
-    let varmap = VarMap::new();
-    let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
-    let critic = PatchDiscriminator2d::new(&cfg, vb).unwrap();
-    let side = 2 * cfg.layers + 2;
-    let real = random(&[2, 2, side, side], 5);
-    let fake = random(&[2, 2, side, side], 6);
-    for norm in [GradientNorm::PerPixel, GradientNorm::PerImage] {
-        let gp_cfg = GradientPenalty { weight: 0.1, norm };
-        let grads = penalty(&critic, &real, &fake, gp_cfg).backward().unwrap();
-        let vars: Vec<Var> = varmap.all_vars();
-        let h = 1e-5;
-        let mut checked = 0;
-        for var in &vars {
-            // The last bias shifts every score equally and so has no gradient: candle reports None.
-            let analytic: Vec<f64> = match grads.get(var) {
-                Some(g) => g.flatten_all().unwrap().to_vec1().unwrap(),
-                None => vec![0.0; var.elem_count()],
-            };
-            let base: Vec<f64> = var.flatten_all().unwrap().to_vec1().unwrap();
-            for (j, &g) in analytic.iter().enumerate().step_by(stride) {
-                let eval = |delta: f64| {
-                    let mut v = base.clone();
-                    v[j] += delta;
-                    var.set(&Tensor::from_vec(v, var.shape(), &Device::Cpu).unwrap())
-                        .unwrap();
-                    penalty(&critic, &real, &fake, gp_cfg)
-                        .to_scalar::<f64>()
-                        .unwrap()
-                };
-                let fd = (eval(h) - eval(-h)) / (2.0 * h);
-                eval(0.0);
-                assert!(
-                    (fd - g).abs() < 1e-6 * (1.0 + g.abs()),
-                    "{norm:?} weight {j} of {:?}: fd {fd} vs {g}",
-                    var.shape()
-                );
-                checked += 1;
+    for cfg in [support::SMALL_CRITIC, support::WIDE_CRITIC] {
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
+        let critic = PatchDiscriminator2d::new(&cfg, vb).unwrap();
+        let side = 2 * cfg.layers + 3;
+        let real = random(&[3, cfg.in_channels, side, side + 1], 7);
+        let fake = random(&[3, cfg.in_channels, side, side + 1], 8);
+        for norm in [GradientNorm::PerPixel, GradientNorm::PerImage] {
+            let gp_cfg = GradientPenalty { weight: 0.3, norm };
+            let generic = penalty(&critic, &real, &fake, gp_cfg);
+            let first = support::first_order_penalty(&critic, &real, &fake, gp_cfg);
+            let (a, b) = (
+                generic.to_scalar::<f64>().unwrap(),
+                first.to_scalar::<f64>().unwrap(),
+            );
+            assert!((a - b).abs() <= 1e-12 * a.abs(), "{norm:?}: {a} vs {b}");
+            let (ga, gb) = (generic.backward().unwrap(), first.backward().unwrap());
+            for var in varmap.all_vars() {
+                match (ga.get(&var), gb.get(&var)) {
+                    (None, None) => assert_eq!(var.rank(), 1, "only biases get no gradient"),
+                    (Some(x), Some(y)) => {
+                        let (scale, diff) = (max_abs(x), max_abs_diff(x, y));
+                        assert!(
+                            scale > 0.0 && diff <= 1e-10 * scale,
+                            "{:?}: {diff} of {scale}",
+                            var.shape()
+                        );
+                    }
+                    (x, y) => panic!(
+                        "{:?}: gradient {} vs {}",
+                        var.shape(),
+                        x.is_some(),
+                        y.is_some()
+                    ),
+                }
             }
         }
-        // Every `stride`-th entry of every weight and bias of every layer.
-        let total: usize = vars.iter().map(|v| v.elem_count().div_ceil(stride)).sum();
-        assert_eq!(checked, total);
     }
-    // The check means something only if the penalty does reach the weights.
-    let grads = penalty(&critic, &real, &fake, GradientPenalty::default())
-        .backward()
-        .unwrap();
-    for var in varmap.all_vars().iter().filter(|v| v.rank() == 4) {
-        let g = grads.get(var).expect("every conv weight gets a gradient");
-        assert!(
-            g.abs()
-                .unwrap()
-                .sum_all()
-                .unwrap()
-                .to_scalar::<f64>()
-                .unwrap()
-                > 0.0
-        );
+}
+
+/// The critic's one-pass WGAN loss against the two-pass definition: value and every gradient,
+/// with batches of different sizes; channels that differ are an error.
+#[test]
+fn one_pass_critic_loss_equals_two_passes() {
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
+    let critic = PatchDiscriminator2d::new(&support::SMALL_CRITIC, vb).unwrap();
+    let real = random(&[2, 2, 9, 8], 11);
+    let fake = random(&[3, 2, 9, 8], 12);
+    let joint = critic.critic_loss(&real, &fake).unwrap();
+    let apart = critic_loss(
+        &critic.forward(&real).unwrap(),
+        &critic.forward(&fake).unwrap(),
+    )
+    .unwrap();
+    let (a, b) = (
+        joint.to_scalar::<f64>().unwrap(),
+        apart.to_scalar::<f64>().unwrap(),
+    );
+    assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-3), "{a} vs {b}");
+    let (ga, gb) = (joint.backward().unwrap(), apart.backward().unwrap());
+    for var in varmap.all_vars() {
+        let diff = max_abs_diff(ga.get(&var).unwrap(), gb.get(&var).unwrap());
+        assert!(diff <= 1e-12, "{:?}: {diff}", var.shape());
     }
+    assert!(critic
+        .critic_loss(&real, &random(&[2, 3, 9, 8], 13))
+        .is_err());
 }
 
 #[test]

@@ -16,8 +16,6 @@
 //! use singrav::scenes::StandingStones;
 //! use singrav::train::{train, Control, RunOptions, TrainOutcome};
 //! use singrav::TrainConfig;
-//! // The gradient penalty differentiates a gradient: set before any backward pass.
-//! std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
 //! let dir = std::path::Path::new("data/stones");
 //! write_dataset(&StandingStones::new(0), dir, &DatasetSpec::default())?;
 //! let config = TrainConfig::preset("tiny")?;

@@ -71,7 +71,7 @@ impl Adam {
             let Some(grad) = grads.get(var.as_tensor()) else {
                 continue;
             };
-            // With CANDLE_GRAD_DO_NOT_DETACH (needed for the gradient penalty) gradients keep
+            // With CANDLE_GRAD_DO_NOT_DETACH (the gradient penalty's on a GPU) gradients keep
             // their backward graph; the moments must not, or every step's graph stays alive.
             let grad = grad.detach();
             let grad = &grad;

@@ -32,7 +32,6 @@ fn resume() -> RunOptions {
 }
 
 fn micro() -> TrainConfig {
-    std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
     TrainConfig::preset("micro").unwrap()
 }
 

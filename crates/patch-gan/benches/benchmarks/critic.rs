@@ -1,6 +1,7 @@
 //! The patch critic's step at the `tiny` preset's last scale (two 6-channel 108^2 images, 16
 //! channels, L = 5), on our Conv2d against the same network on candle's conv2d, in one run:
-//! a forward pass, forward + backward, and the WGAN-GP penalty with its second-order backward.
+//! a forward pass, forward + backward, and the WGAN-GP penalty with its second-order backward
+//! (and, for ours, as the critic's own first-order graph).
 
 use std::time::Duration;
 
@@ -90,6 +91,17 @@ fn bench_critic(c: &mut Criterion) {
             })
         });
     }
+    // The same penalty as the critic's own first-order graph (no double backward).
+    group.bench_function(
+        BenchmarkId::new("gradient_penalty", "ours_first_order"),
+        |b| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+            b.iter(|| {
+                let gp = ours.gradient_penalty(&real, &fake, GradientPenalty::default(), &mut rng);
+                gp.unwrap().backward().unwrap()
+            })
+        },
+    );
     group.finish();
 }
 

@@ -93,6 +93,41 @@ pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     Ok(apply(&xs, &kernel, ConvOp(Domain::Grid(spec)))?.reshape((n, c_out, h_out, w_out))?)
 }
 
+/// The input gradient of [`conv2d`] on the CPU: `d/dx sum(grad_out * conv2d(x, kernel))` for an
+/// `x` of `input_dims` `(N, C_in, H, W)` (PyTorch's `conv_transpose2d` of `grad_out`). It is
+/// linear in both arguments and differentiable in both, so a critic's input gradient written
+/// with it is an ordinary first-order graph in the critic's weights.
+pub(crate) fn conv2d_grad_input(
+    grad_out: &Tensor,
+    kernel: &Tensor,
+    cfg: ConvConfig,
+    input_dims: (usize, usize, usize, usize),
+) -> Result<Tensor> {
+    let (n, c_in, h, w) = input_dims;
+    let (n_out, c_out, h_out, w_out) = grad_out.dims4()?;
+    let (kc_out, kc_in, kh, kw) = kernel.dims4()?;
+    let spec = Spec {
+        padding: [0, cfg.padding, cfg.padding],
+        stride: cfg.stride,
+    };
+    let x_shape = Shape::from((n, c_in, 1, h, w));
+    let kernel = kernel.reshape((kc_out, kc_in, 1, kh, kw))?;
+    let g = geometry(&x_shape, kernel.shape(), spec)?;
+    if g.output() != [1, h_out, w_out] || n_out != n || c_out != kc_out {
+        return Err(invalid(
+            "output gradient",
+            format!(
+                "{:?} does not match the output of a {input_dims:?} input and a {:?} kernel",
+                grad_out.shape(),
+                kernel.shape()
+            ),
+        ));
+    }
+    let grad_out = grad_out.reshape((n, c_out, 1, h_out, w_out))?;
+    let op = GradInputOp(Domain::Grid(spec), x_shape);
+    Ok(apply(&grad_out, &kernel, op)?.reshape(input_dims)?)
+}
+
 /// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public
 /// so tests and benchmarks can compare it with the CPU kernel.
 ///

@@ -70,7 +70,11 @@ pub fn bias_leaky_relu(
 /// positive inputs (the slope is positive), so the output tells the branch. The output enters
 /// detached: the slope does not change with it (almost everywhere), and candle's backward pass
 /// insists on a gradient for every tracked argument.
-fn leaky_grad(grad: &Tensor, output: &Tensor, slope: f64) -> candle_core::Result<Tensor> {
+pub(crate) fn leaky_grad(
+    grad: &Tensor,
+    output: &Tensor,
+    slope: f64,
+) -> candle_core::Result<Tensor> {
     grad.contiguous()?
         .apply_op2(&output.detach().contiguous()?, LeakyGrad(slope))
 }

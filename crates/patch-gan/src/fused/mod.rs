@@ -14,6 +14,7 @@ mod channel_sum;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, NormStats};
+pub(crate) use leaky::leaky_grad;
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
 /// Elements per parallel task of the element-wise kernels: large enough that rayon's overhead

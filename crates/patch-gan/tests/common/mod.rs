@@ -7,12 +7,24 @@ use candle_core::{Device, Tensor, Var};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+pub mod penalty;
+
 /// An f64 tensor of `shape` with values uniform in [-1, 1) from `seed`.
 pub fn random(shape: &[usize], seed: u64) -> Tensor {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = shape.iter().product();
     let v: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
     Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+}
+
+/// The largest absolute value of an f64 tensor.
+pub fn max_abs(t: &Tensor) -> f64 {
+    t.abs().unwrap().max_all().unwrap().to_scalar().unwrap()
+}
+
+/// The largest absolute difference between two f64 tensors of one shape.
+pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> f64 {
+    max_abs(&(a - b).unwrap())
 }
 
 /// The values of an f64 tensor, flattened.
@@ -29,10 +41,24 @@ pub fn check_finite_differences(
     step: f64,
     what: &str,
 ) {
+    check_finite_differences_every(var, analytic, f, step, 1, what);
+}
+
+/// [`check_finite_differences`] along every `stride`-th entry of `var`; returns how many were
+/// checked.
+pub fn check_finite_differences_every(
+    var: &Var,
+    analytic: &Tensor,
+    f: impl Fn() -> f64,
+    step: f64,
+    stride: usize,
+    what: &str,
+) -> usize {
     let base = values(var.as_tensor());
     let analytic = values(analytic);
     assert_eq!(analytic.len(), base.len(), "{what}");
-    for (j, &g) in analytic.iter().enumerate() {
+    let mut checked = 0;
+    for (j, &g) in analytic.iter().enumerate().step_by(stride) {
         let eval = |delta: f64| {
             let mut v = base.clone();
             v[j] += delta;
@@ -47,5 +73,7 @@ pub fn check_finite_differences(
             "{what}, entry {j} of {:?}: finite difference {fd} vs {g}",
             var.shape()
         );
+        checked += 1;
     }
+    checked
 }

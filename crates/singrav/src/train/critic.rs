@@ -4,10 +4,7 @@ use std::collections::HashMap;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use patch_gan::{
-    critic_loss, gradient_penalty, GradientPenalty, PatchDiscriminator2d,
-    PatchDiscriminator2dConfig,
-};
+use patch_gan::{GradientPenalty, PatchDiscriminator2d, PatchDiscriminator2dConfig};
 
 use super::volume_scale::{pick_views, select};
 use crate::config::TrainConfig;
@@ -58,18 +55,18 @@ impl Critic {
         rng: &mut impl rand::Rng,
     ) -> Result<(f32, f32)> {
         let fake = fake.detach();
-        let loss = critic_loss(&self.net.score(real)?, &self.net.score(&fake)?)?;
+        let loss = self.net.critic_loss(real, &fake)?;
         let penalty = GradientPenalty {
             weight: gp_weight,
             ..GradientPenalty::default()
         };
-        let gp = match gradient_penalty(&self.net, real, &fake, penalty, rng) {
+        let gp = match self.net.gradient_penalty(real, &fake, penalty, rng) {
             Err(patch_gan::Error::SecondOrderDisabled) => {
                 return Err(Error::Invalid {
                     what: "environment".into(),
-                    why: "training needs CANDLE_GRAD_DO_NOT_DETACH=1 set before the first \
-                          backward pass (the gradient penalty differentiates a gradient); the \
-                          volgen CLI sets it itself"
+                    why: "training on a GPU needs CANDLE_GRAD_DO_NOT_DETACH=1 set before the \
+                          first backward pass (there the gradient penalty differentiates a \
+                          gradient); the volgen CLI sets it itself"
                         .into(),
                 })
             }

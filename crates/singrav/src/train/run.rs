@@ -65,8 +65,9 @@ const PICTURE_STREAM: usize = usize::MAX - 1;
 /// it. VGG-19 weights the configuration needs (`options.vgg19_weights`) are loaded before
 /// anything is written, so a missing or broken file fails at once with [`Error::Weights`].
 ///
-/// Training needs `CANDLE_GRAD_DO_NOT_DETACH=1` in the environment before the first backward
-/// pass (the gradient penalty differentiates a gradient); without it this returns an error.
+/// On the CPU nothing else is needed. On other devices the critics' gradient penalty is
+/// candle's double backward, which needs `CANDLE_GRAD_DO_NOT_DETACH=1` in the environment
+/// before the first backward pass; without it this returns an error there.
 /// `observer` sees every iteration and may stop the run.
 pub fn train(
     config: &TrainConfig,

@@ -1,0 +1,24 @@
+//! The critic's first-order gradient penalty without `CANDLE_GRAD_DO_NOT_DETACH`: this file never
+//! sets it, so candle detaches every gradient, as in a program that does not ask for second
+//! order; the penalty's gradient must still match finite differences.
+
+mod common;
+use common::penalty::{
+    first_order_penalty, penalty_gradient_matches_finite_differences, SMALL_CRITIC, WIDE_CRITIC,
+};
+
+#[test]
+fn the_variable_is_not_set() {
+    assert!(std::env::var_os("CANDLE_GRAD_DO_NOT_DETACH").is_none());
+}
+
+#[test]
+fn first_order_penalty_gradient_matches_finite_differences() {
+    penalty_gradient_matches_finite_differences(SMALL_CRITIC, 1, first_order_penalty);
+}
+
+#[test]
+fn first_order_penalty_gradient_matches_finite_differences_through_winograd() {
+    // Every 97th weight, as the double backward's test.
+    penalty_gradient_matches_finite_differences(WIDE_CRITIC, 97, first_order_penalty);
+}
