@@ -18,7 +18,11 @@
 //!   (`blocks.{i}.conv.weight`, `blocks.{i}.bn.running_mean`, `tail.bias`, ...).
 //! - Layers with batch norm implement `ModuleT` (`train = true` uses batch statistics and updates
 //!   the running ones); the others implement `Module`.
-//! - Losses are plain functions; randomness comes from a caller's RNG.
+//! - Losses are plain functions; randomness comes from a caller's RNG. The patch critic also
+//!   has its own [`PatchDiscriminator2d::critic_loss`] (real and fake in one forward pass) and
+//!   [`PatchDiscriminator2d::gradient_penalty`] (the WGAN-GP penalty as a first-order graph,
+//!   about twice as fast as the generic [`gradient_penalty`] and without candle's
+//!   `CANDLE_GRAD_DO_NOT_DETACH`).
 //!
 //! ```
 //! use candle_core::{DType, Device, Module, ModuleT, Tensor};
