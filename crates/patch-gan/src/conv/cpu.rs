@@ -14,6 +14,7 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
+use super::scratch::pooled_vec;
 use crate::element::Element;
 
 /// Shape of one batched 3D convolution.
@@ -207,7 +208,7 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &impl Columns) -> Vec<T> 
     let dst = SharedMut(out.as_mut_ptr());
     let max_cols = g.max_chunk_cols();
     g.chunks().into_par_iter().for_each_init(
-        || vec![T::ZERO; patch * max_cols],
+        || pooled_vec::<T>(patch * max_cols),
         |cols, chunk| {
             let (n, first, nc) = chunk;
             let cols = &mut cols[..patch * nc];
@@ -263,7 +264,7 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &impl Columns)
         .par_chunks(per_block)
         .map(|block| {
             let mut acc = vec![T::ZERO; size];
-            let mut cols = vec![T::ZERO; patch * max_cols];
+            let mut cols = pooled_vec::<T>(patch * max_cols);
             for &chunk in block {
                 let (n, first, nc) = chunk;
                 let chunk_cols = &mut cols[..patch * nc];

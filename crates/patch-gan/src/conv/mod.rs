@@ -7,6 +7,7 @@ mod conv2d;
 mod conv3d;
 mod cpu;
 pub(crate) mod op;
+mod scratch;
 mod slices;
 mod winograd;
 

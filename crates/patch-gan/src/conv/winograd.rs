@@ -19,14 +19,11 @@
 //! as the direct sum (the tests hold it to the im2col kernel in f64 and f32). Work is split into
 //! chunks of tiles of one batch item whose transformed inputs and products stay in the L2 cache.
 
-use std::any::Any;
-use std::cell::RefCell;
-use std::ops::{Deref, DerefMut};
-
 use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::cpu::{Geometry, SharedMut};
+use super::scratch::{at_least, Pooled};
 use crate::element::Element;
 
 /// Largest transformed tile: 4 x 4 x 4.
@@ -551,78 +548,39 @@ struct ForwardPass<'a, T> {
 }
 
 /// The per-task scratch of a pass: transformed inputs, products (or transformed output
-/// gradients), rows. Every chunk writes each value it reads first, so a scratch can be reused
-/// as it is, stale values and all.
+/// gradients), rows. Every chunk writes each value it reads first, so a scratch is reused from
+/// the thread's pool as it is ([`scratch_for`]).
 struct ForwardScratch<T> {
     v: Vec<T>,
     m: Vec<T>,
     bufs: RowBuffers<T>,
 }
 
-thread_local! {
-    /// Scratches of earlier passes on this thread (f32 or f64), reused by the next ones: a
-    /// fresh one per task was zeroed anew each time (a few MiB of `memset` per convolution,
-    /// a third of a small critic layer's time).
-    static SCRATCH_POOL: RefCell<Vec<Box<dyn Any>>> = const { RefCell::new(Vec::new()) };
-}
-
-/// A [`ForwardScratch`] for a pass of `plan`, taken from this thread's pool (or made) and put
-/// back when dropped.
-struct PooledScratch<T: Element>(Option<ForwardScratch<T>>);
-
-impl<T: Element> PooledScratch<T> {
-    fn take(plan: &Plan, c_in: usize, c_out: usize) -> Self {
-        let (p, most) = (plan.positions, plan.chunk_tiles());
-        let pooled = SCRATCH_POOL.with(|pool| {
-            let mut pool = pool.borrow_mut();
-            let at = pool.iter().position(|s| s.is::<ForwardScratch<T>>())?;
-            pool.swap_remove(at).downcast::<ForwardScratch<T>>().ok()
-        });
-        let mut scratch = pooled.map(|b| *b).unwrap_or_else(|| ForwardScratch {
+// By hand: a derive would ask `T: Default`.
+impl<T> Default for ForwardScratch<T> {
+    fn default() -> Self {
+        Self {
             v: Vec::new(),
             m: Vec::new(),
             bufs: RowBuffers {
                 a: Vec::new(),
                 b: Vec::new(),
             },
-        });
-        let rows = RowBuffers::<T>::len(plan);
-        for (buf, len) in [
-            (&mut scratch.v, p * c_in * most),
-            (&mut scratch.m, p * c_out * most),
-            (&mut scratch.bufs.a, rows),
-            (&mut scratch.bufs.b, rows),
-        ] {
-            if buf.len() < len {
-                buf.resize(len, T::ZERO);
-            }
-        }
-        Self(Some(scratch))
-    }
-}
-
-impl<T: Element> Deref for PooledScratch<T> {
-    type Target = ForwardScratch<T>;
-
-    fn deref(&self) -> &ForwardScratch<T> {
-        self.0.as_ref().expect("present until dropped")
-    }
-}
-
-impl<T: Element> DerefMut for PooledScratch<T> {
-    fn deref_mut(&mut self) -> &mut ForwardScratch<T> {
-        self.0.as_mut().expect("present until dropped")
-    }
-}
-
-impl<T: Element> Drop for PooledScratch<T> {
-    fn drop(&mut self) {
-        if let Some(scratch) = self.0.take() {
-            // Thread-local storage may already be gone while a thread exits: then the
-            // scratch is simply freed.
-            let _ = SCRATCH_POOL.try_with(|pool| pool.borrow_mut().push(Box::new(scratch)));
         }
     }
+}
+
+/// A pooled [`ForwardScratch`] large enough for a pass of `plan`.
+fn scratch_for<T: Element>(plan: &Plan, c_in: usize, c_out: usize) -> Pooled<ForwardScratch<T>> {
+    let (p, most) = (plan.positions, plan.chunk_tiles());
+    let mut scratch = Pooled::<ForwardScratch<T>>::take();
+    let rows = RowBuffers::<T>::len(plan);
+    let ForwardScratch { v, m, bufs } = &mut *scratch;
+    at_least(v, p * c_in * most);
+    at_least(m, p * c_out * most);
+    at_least(&mut bufs.a, rows);
+    at_least(&mut bufs.b, rows);
+    scratch
 }
 
 /// One chunk of a forward pass: transform its input tiles, multiply per position, transform
@@ -727,7 +685,7 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     let avx2 = has_avx2();
     let _ = avx2; // read by the x86-64 branch only
     plan.chunks(g.batch).into_par_iter().for_each_init(
-        || PooledScratch::take(&plan, g.c_in, g.c_out),
+        || scratch_for(&plan, g.c_in, g.c_out),
         |scratch, chunk| {
             let scratch: &mut ForwardScratch<T> = scratch;
             #[cfg(target_arch = "x86_64")]
@@ -837,7 +795,7 @@ pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> 
         .par_chunks(per_block)
         .map(|block| {
             let mut du = vec![T::ZERO; p * co * ci];
-            let mut scratch = PooledScratch::take(&plan, ci, co);
+            let mut scratch = scratch_for(&plan, ci, co);
             for &chunk in block {
                 #[cfg(target_arch = "x86_64")]
                 if avx2 {
