@@ -119,14 +119,8 @@ fn blur_axis(xs: &Tensor, dim: usize) -> candle_core::Result<Tensor> {
 /// `xs` shifted by one along `dim` both ways, `(x[i-1], x[i+1])`, indices clamped to the axis.
 fn clamped_neighbours(xs: &Tensor, dim: usize) -> candle_core::Result<(Tensor, Tensor)> {
     let n = xs.dim(dim)?;
-    if n == 1 {
-        return Ok((xs.clone(), xs.clone()));
-    }
-    let first = xs.narrow(dim, 0, 1)?;
-    let last = xs.narrow(dim, n - 1, 1)?;
-    let prev = Tensor::cat(&[&first, &xs.narrow(dim, 0, n - 1)?], dim)?;
-    let next = Tensor::cat(&[&xs.narrow(dim, 1, n - 1)?, &last], dim)?;
-    Ok((prev, next))
+    let padded = xs.pad_with_same(dim, 1, 1)?;
+    Ok((padded.narrow(dim, 0, n)?, padded.narrow(dim, 2, n)?))
 }
 
 /// Bilinear x2 upsampling of `(N, C, H, W)` with PyTorch's `align_corners = false` (half-pixel

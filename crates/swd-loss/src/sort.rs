@@ -61,31 +61,27 @@ trait SortKey: Copy + Send + Sync {
     fn key(self) -> Self::Key;
 }
 
-impl SortKey for f32 {
-    type Key = u32;
-    fn key(self) -> u32 {
-        let bits = self.to_bits();
-        // Negative floats order backwards in their bits: flip them all; positive ones go
-        // above every negative one.
-        if bits >> 31 == 1 {
-            !bits
-        } else {
-            bits | 1 << 31
+/// `SortKey` for a float and the unsigned integer of its width: negative floats order
+/// backwards in their bits, so all their bits are flipped; positive ones get the sign bit set,
+/// which puts them above every negative one.
+macro_rules! float_sort_key {
+    ($($float:ty => $int:ty),*) => {$(
+        impl SortKey for $float {
+            type Key = $int;
+            fn key(self) -> $int {
+                let bits = self.to_bits();
+                let sign = 1 << (<$int>::BITS - 1);
+                if bits & sign != 0 {
+                    !bits
+                } else {
+                    bits | sign
+                }
+            }
         }
-    }
+    )*};
 }
 
-impl SortKey for f64 {
-    type Key = u64;
-    fn key(self) -> u64 {
-        let bits = self.to_bits();
-        if bits >> 63 == 1 {
-            !bits
-        } else {
-            bits | 1 << 63
-        }
-    }
-}
+float_sort_key!(f32 => u32, f64 => u64);
 
 /// An unsigned key the radix sort splits into [`DIGIT_BITS`]-bit digits.
 trait RadixKey: Copy + Ord + Send + Sync {
