@@ -98,6 +98,43 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
         [22, 22, 22],
         "twice micro's finest 11^3"
     );
+
+    // A 3D critic judges the samples against the fitted volume, here without the 3D
+    // comparison of the reconstruction: recorded in the run, logged at the 3D scales.
+    let run3 = tmp.path().join("run3");
+    let moved = tmp.path().join("moved.safetensors");
+    let args = [
+        "--fitted",
+        path(&moved),
+        "--lambda-fitted",
+        "0",
+        "--lambda-volume-critic",
+        "0.5",
+    ];
+    train_micro_with(&data, &run3, &args);
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run3.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["lambda_volume_critic"], 0.5);
+    assert_eq!(config["volume_critic_colour"], false);
+    let log = std::fs::read_to_string(run3.join("log.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(lines.iter().all(|l| l["fitted"].is_null()));
+    assert!(lines.iter().any(|l| l["volume_critic"].is_f64()));
+    // Without a fitted volume the 3D critic has nothing to judge against.
+    let err = failure(&volgen(&[
+        "train",
+        path(&data),
+        "--out",
+        path(&tmp.path().join("run4")),
+        "--preset",
+        "micro",
+        "--lambda-volume-critic",
+        "1",
+    ]));
+    assert!(err.contains("lambda_volume_critic"), "{err}");
 }
 
 #[test]

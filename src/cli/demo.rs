@@ -47,7 +47,7 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 9] = [
+const LOSS_COLUMNS: [(&str, &str); 12] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
     ("opacity", "opacity"),
@@ -57,6 +57,9 @@ const LOSS_COLUMNS: [(&str, &str); 9] = [
     ("penalty", "gradient penalty"),
     ("adversarial", "adversarial"),
     ("swd", "SWD"),
+    ("volume_critic", "3D critic"),
+    ("volume_penalty", "3D gradient penalty"),
+    ("volume_adversarial", "3D adversarial"),
 ];
 
 /// The summary written to `summary.json` (and, readably, `summary.md`).
@@ -293,19 +296,33 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
 }
 
 /// The time, memory and last logged losses of every scale as a Markdown table, "-" where a
-/// loss is not computed at that scale.
+/// loss is not computed at that scale; a loss the run never computed has no column.
 fn loss_table(summary: &Summary) -> String {
+    let value = |i: usize, key: &str| {
+        summary
+            .final_losses
+            .get(i)
+            .and_then(|l| l.get(key))
+            .and_then(serde_json::Value::as_f64)
+    };
+    let scales = summary.scale_seconds.len();
+    // Only the terms this run computed somewhere (the 3D critic's, for one, are rare).
+    let columns: Vec<_> = LOSS_COLUMNS
+        .iter()
+        .filter(|(key, _)| (0..scales).any(|i| value(i, key).is_some()))
+        .collect();
     let mut table = String::from("| scale | seconds | peak MiB | iterations |");
-    for (_, title) in LOSS_COLUMNS {
+    for (_, title) in &columns {
         table.push_str(&format!(" {title} |"));
     }
-    table.push_str(&format!("\n|{}\n", "---|".repeat(4 + LOSS_COLUMNS.len())));
+    table.push_str(&format!("\n|{}\n", "---|".repeat(4 + columns.len())));
     for (i, seconds) in summary.scale_seconds.iter().enumerate() {
         let mib = summary.scale_peak_mib.get(i).copied().flatten();
-        let last = summary.final_losses.get(i);
-        let field = |key: &str| last.and_then(|l| l.get(key));
         // The log's iteration counts from 0.
-        let iterations = field("iteration")
+        let iterations = summary
+            .final_losses
+            .get(i)
+            .and_then(|l| l.get("iteration"))
             .and_then(serde_json::Value::as_u64)
             .map_or("-".into(), |it| (it + 1).to_string());
         table.push_str(&format!(
@@ -313,10 +330,8 @@ fn loss_table(summary: &Summary) -> String {
             i + 1,
             mib.map_or("n/a".into(), |m| format!("{m:.0}")),
         ));
-        for (key, _) in LOSS_COLUMNS {
-            let cell = field(key)
-                .and_then(serde_json::Value::as_f64)
-                .map_or("-".into(), |v| format!("{v:.4}"));
+        for (key, _) in &columns {
+            let cell = value(i, key).map_or("-".into(), |v| format!("{v:.4}"));
             table.push_str(&format!(" {cell} |"));
         }
         table.push('\n');

@@ -106,6 +106,14 @@ pub struct TrainOptions {
     /// Weight of the fitted-volume comparison (with --fitted or --fit).
     #[arg(long, value_name = "W", default_value_t = DEFAULT_LAMBDA_FITTED)]
     pub lambda_fitted: f64,
+    /// Weight of a 3D patch critic's adversarial term at every 3D scale: it judges generated
+    /// volumes against the fitted volume (needs --fitted or --fit; --lambda-fitted 0 keeps the
+    /// critic without the 3D comparison of the reconstruction). Default 0: no 3D critic.
+    #[arg(long, value_name = "W")]
+    pub lambda_volume_critic: Option<f64>,
+    /// The 3D critic also judges opacity-weighted colour per voxel, not only opacity.
+    #[arg(long, requires = "lambda_volume_critic")]
+    pub volume_critic_colour: bool,
     /// Set any field of the configuration (config.json's names) to a JSON value, after the
     /// preset and the flags above: `--set lambda_color=50 --set channels=32`. Repeatable.
     #[arg(long = "set", value_name = "FIELD=VALUE")]
@@ -159,6 +167,10 @@ impl TrainOptions {
         if self.fitted.is_some() || self.fit {
             config.lambda_fitted = self.lambda_fitted;
         }
+        if let Some(weight) = self.lambda_volume_critic {
+            config.lambda_volume_critic = weight;
+        }
+        config.volume_critic_colour |= self.volume_critic_colour;
         config.holdout = self.holdout;
         for setting in &self.settings {
             let (field, value) = setting.split_once('=').with_context(|| {
@@ -409,6 +421,9 @@ fn format_losses(l: &StepLosses) -> String {
         ("opacity", l.opacity),
         ("colour", l.colour_distribution),
         ("height", l.height_profile),
+        ("D3", l.volume_critic),
+        ("gp3", l.volume_penalty),
+        ("adv3", l.volume_adversarial),
     ];
     for (name, value) in optional {
         if let Some(v) = value {

@@ -1,22 +1,20 @@
-//! `PatchDiscriminator2d`: the paper's 2D patch critic D_n.
+//! The patch critic: the paper's 2D critic D_n of renderings ([`PatchDiscriminator2d`]) and the
+//! same network over volumes ([`PatchDiscriminator3d`], 3inGAN's 3D critic).
 
 use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;
 use rand::Rng;
 
-use crate::conv::{conv2d, op, Conv2d, ConvConfig};
+use crate::conv::{layer_tensors, op, ConvConfig};
 use crate::error::{invalid, Result};
 use crate::fused::{bias_leaky_relu, leaky_grad};
-use crate::norm::{leaky_relu, LEAKY_SLOPE};
+use crate::norm::LEAKY_SLOPE;
 use crate::wgan::{mixed_images, penalty_of_gradient, GradientPenalty};
 
-/// Kernel size of every discriminator layer.
-const KERNEL: usize = 3;
-
-/// Receptive field, in pixels along each axis, of `layers` unpadded 3x3 stride-1 convolutions:
-/// each layer widens it by 2, so it is `2 L + 1` (11 for L = 5, 15 for L = 7). One patch-map
-/// value depends on exactly this square of input pixels, and the patch map is `2 L` pixels
-/// smaller than the input along each axis.
+/// Receptive field, in pixels (voxels) along each axis, of `layers` unpadded 3x3 (3x3x3) stride-1
+/// convolutions: each layer widens it by 2, so it is `2 L + 1` (11 for L = 5, 15 for L = 7). One
+/// patch-map value depends on exactly this square (cube) of the input, and the patch map is
+/// `2 L` smaller than the input along each axis.
 ///
 /// ```
 /// assert_eq!(patch_gan::receptive_field(5), 11);
@@ -26,11 +24,11 @@ pub fn receptive_field(layers: usize) -> usize {
     2 * layers + 1
 }
 
-/// Shape of a [`PatchDiscriminator2d`]. The default is the paper's D_n for n < N with L = 5:
+/// Shape of a [`PatchDiscriminator`]. The default is the paper's D_n for n < N with L = 5:
 /// 4 input channels (RGB + depth), 32 hidden channels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PatchDiscriminator2dConfig {
-    /// Number of Conv2d layers L, at least 2 (the paper uses 5 or 7).
+pub struct PatchDiscriminatorConfig {
+    /// Number of convolution layers L, at least 2 (the paper uses 5 or 7).
     pub layers: usize,
     /// Hidden channels (32).
     pub channels: usize,
@@ -38,7 +36,10 @@ pub struct PatchDiscriminator2dConfig {
     pub in_channels: usize,
 }
 
-impl Default for PatchDiscriminator2dConfig {
+/// The 2D critic's config under its original name.
+pub type PatchDiscriminator2dConfig = PatchDiscriminatorConfig;
+
+impl Default for PatchDiscriminatorConfig {
     fn default() -> Self {
         Self {
             layers: 5,
@@ -48,7 +49,7 @@ impl Default for PatchDiscriminator2dConfig {
     }
 }
 
-impl PatchDiscriminator2dConfig {
+impl PatchDiscriminatorConfig {
     /// The same config with `layers` layers.
     pub fn with_layers(self, layers: usize) -> Self {
         Self { layers, ..self }
@@ -68,42 +69,78 @@ impl PatchDiscriminator2dConfig {
     }
 }
 
-/// The patch critic: `L - 1` unpadded 3x3 Conv2d + LeakyReLU(0.2) layers, then an unpadded 3x3
-/// Conv2d to one channel. `(N, C, H, W)` maps to the patch map `(N, 1, H - 2L, W - 2L)`; its mean
-/// is the critic's score ([`PatchDiscriminator2d::score`]).
+/// One layer's tensors: weight `(C_out, C_in, 3, ..)` with `AXES` kernel axes and bias.
+#[derive(Debug, Clone)]
+struct Layer {
+    weight: Tensor,
+    bias: Tensor,
+}
+
+/// The patch critic over `AXES` spatial axes: `L - 1` unpadded 3x3 (3x3x3) convolutions +
+/// LeakyReLU(0.2), then an unpadded convolution to one channel. Use it as
+/// [`PatchDiscriminator2d`] on images `(N, C, H, W)`, mapped to the patch map
+/// `(N, 1, H - 2L, W - 2L)`, or as [`PatchDiscriminator3d`] on volumes `(N, C, D, H, W)`; the
+/// mean of the patch map is the critic's score ([`PatchDiscriminator::score`]).
 ///
 /// Checkpoint names: `blocks.{i}.conv.{weight,bias}` for `i < L - 1`, and `tail.{weight,bias}`.
 ///
 /// ```
 /// use candle_core::{DType, Device, Module, Tensor};
 /// use candle_nn::{VarBuilder, VarMap};
-/// use patch_gan::{PatchDiscriminator2d, PatchDiscriminator2dConfig};
+/// use patch_gan::{PatchDiscriminator2d, PatchDiscriminator3d, PatchDiscriminatorConfig};
 /// let varmap = VarMap::new();
 /// let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-/// let d = PatchDiscriminator2d::new(&PatchDiscriminator2dConfig::default(), vb.pp("d1"))?;
+/// let d = PatchDiscriminator2d::new(&PatchDiscriminatorConfig::default(), vb.pp("d1"))?;
 /// let map = d.forward(&Tensor::zeros((2, 4, 32, 32), DType::F32, &Device::Cpu)?)?;
 /// assert_eq!(map.dims(), &[2, 1, 22, 22]);
+/// // A 3D critic of opacity and colour volumes.
+/// let cfg = PatchDiscriminatorConfig { layers: 3, channels: 8, in_channels: 4 };
+/// let d3 = PatchDiscriminator3d::new(&cfg, vb.pp("d3"))?;
+/// let map = d3.forward(&Tensor::zeros((1, 4, 10, 10, 10), DType::F32, &Device::Cpu)?)?;
+/// assert_eq!(map.dims(), &[1, 1, 4, 4, 4]);
 /// # Ok::<(), patch_gan::Error>(())
 /// ```
 #[derive(Debug, Clone)]
-pub struct PatchDiscriminator2d {
-    blocks: Vec<Conv2d>,
-    tail: Conv2d,
-    config: PatchDiscriminator2dConfig,
+pub struct PatchDiscriminator<const AXES: usize> {
+    blocks: Vec<Layer>,
+    tail: Layer,
+    config: PatchDiscriminatorConfig,
 }
 
-impl PatchDiscriminator2d {
-    /// Builds (or loads) the discriminator's tensors under `vb`.
-    pub fn new(config: &PatchDiscriminator2dConfig, vb: VarBuilder) -> Result<Self> {
+/// The paper's 2D patch critic D_n of renderings, `(N, C, H, W)`.
+pub type PatchDiscriminator2d = PatchDiscriminator<2>;
+
+/// The patch critic of volumes, `(N, C, D, H, W)`: judges 3D patches as 3inGAN's 3D critic does.
+pub type PatchDiscriminator3d = PatchDiscriminator<3>;
+
+/// Kernel size of every critic layer.
+const KERNEL: usize = 3;
+
+impl<const AXES: usize> PatchDiscriminator<AXES> {
+    /// Builds (or loads) the critic's tensors under `vb`. Errors on fewer than 2 layers, zero
+    /// channels, or `AXES` other than 2 and 3.
+    pub fn new(config: &PatchDiscriminatorConfig, vb: VarBuilder) -> Result<Self> {
+        if !(2..=3).contains(&AXES) {
+            return Err(invalid(
+                "PatchDiscriminator axes",
+                format!("2 (images) or 3 (volumes), got {AXES}"),
+            ));
+        }
         if config.layers < 2 {
             return Err(invalid(
-                "PatchDiscriminator2d layers",
+                "PatchDiscriminator layers",
                 format!("need at least 2, got {}", config.layers),
             ));
         }
         if config.channels == 0 || config.in_channels == 0 {
-            return Err(invalid("PatchDiscriminator2d channels", "must be positive"));
+            return Err(invalid("PatchDiscriminator channels", "must be positive"));
         }
+        let layer = |c_in: usize, c_out: usize, vb: VarBuilder| -> Result<Layer> {
+            match layer_tensors(c_in, c_out, KERNEL, AXES, true, vb)? {
+                (weight, Some(bias)) => Ok(Layer { weight, bias }),
+                (_, None) => Err(invalid("PatchDiscriminator", "a layer without bias")),
+            }
+        };
         let blocks = (0..config.layers - 1)
             .map(|i| {
                 let c_in = if i == 0 {
@@ -111,22 +148,10 @@ impl PatchDiscriminator2d {
                 } else {
                     config.channels
                 };
-                conv2d(
-                    c_in,
-                    config.channels,
-                    KERNEL,
-                    ConvConfig::default(),
-                    vb.pp("blocks").pp(i).pp("conv"),
-                )
+                layer(c_in, config.channels, vb.pp("blocks").pp(i).pp("conv"))
             })
             .collect::<Result<Vec<_>>>()?;
-        let tail = conv2d(
-            config.channels,
-            1,
-            KERNEL,
-            ConvConfig::default(),
-            vb.pp("tail"),
-        )?;
+        let tail = layer(config.channels, 1, vb.pp("tail"))?;
         Ok(Self {
             blocks,
             tail,
@@ -135,21 +160,19 @@ impl PatchDiscriminator2d {
     }
 
     /// The configuration it was built with.
-    pub fn config(&self) -> &PatchDiscriminator2dConfig {
+    pub fn config(&self) -> &PatchDiscriminatorConfig {
         &self.config
     }
 
-    /// One score per image: the mean of the patch map, shape `(N,)`.
+    /// One score per input: the mean of the patch map, shape `(N,)`.
     pub fn score(&self, xs: &Tensor) -> Result<Tensor> {
         Ok(self.forward(xs)?.flatten_from(1)?.mean(1)?)
     }
-}
 
-impl PatchDiscriminator2d {
     /// The critic's WGAN loss [`critic_loss`](crate::critic_loss)`(D(real), D(fake))`, i.e.
     /// `mean(D(fake)) - mean(D(real))` over all patches, with both batches through one forward
-    /// pass (half the convolution calls, each on twice the images). `real` and `fake` may hold
-    /// different numbers of images of the same channels and size.
+    /// pass (half the convolution calls, each on twice the inputs). `real` and `fake` may hold
+    /// different numbers of images (volumes) of the same channels and size.
     ///
     /// ```
     /// use candle_core::{DType, Device, Module, Tensor};
@@ -167,12 +190,12 @@ impl PatchDiscriminator2d {
     /// ```
     pub fn critic_loss(&self, real: &Tensor, fake: &Tensor) -> Result<Tensor> {
         let (n_real, n_fake) = (real.dim(0)?, fake.dim(0)?);
-        if real.rank() != 4 || real.dims()[1..] != fake.dims()[1..] || n_real * n_fake == 0 {
+        if real.rank() != AXES + 2 || real.dims()[1..] != fake.dims()[1..] || n_real * n_fake == 0 {
             return Err(invalid(
                 "critic loss inputs",
                 format!(
-                    "real {:?} and fake {:?} must be non-empty (N, C, H, W) batches of the same \
-                     C, H, W",
+                    "real {:?} and fake {:?} must be non-empty batches (N, C, ..) with {AXES} \
+                     spatial axes, of the same channels and size",
                     real.shape(),
                     fake.shape()
                 ),
@@ -190,8 +213,10 @@ impl PatchDiscriminator2d {
                 }
             })
             .collect();
-        let weights = Tensor::from_vec(weights, (n_real + n_fake, 1, 1, 1), maps.device())?
-            .to_dtype(maps.dtype())?;
+        let mut weight_shape = vec![1; maps.rank()];
+        weight_shape[0] = n_real + n_fake;
+        let weights =
+            Tensor::from_vec(weights, weight_shape, maps.device())?.to_dtype(maps.dtype())?;
         Ok(maps.broadcast_mul(&weights)?.sum_all()?)
     }
 
@@ -200,9 +225,9 @@ impl PatchDiscriminator2d {
     /// norm and weight), built as a first-order graph in the weights, so it needs neither
     /// `CANDLE_GRAD_DO_NOT_DETACH` nor candle's second-order bookkeeping.
     ///
-    /// The critic is piecewise linear: its input gradient at the mixed images is
+    /// The critic is piecewise linear: its input gradient at the mixed inputs is
     /// `W_1^T M_1 W_2^T ... M_{L-1} W_L^T 1`, with `M_k` the LeakyReLU slopes of layer `k` at those
-    /// images, which do not change under a small change of the weights (nor do the biases enter
+    /// inputs, which do not change under a small change of the weights (nor do the biases enter
     /// it). So the forward pass runs on constants and only records the slopes, and the gradient
     /// is written as a chain of transposed convolutions whose backward pass is the penalty's
     /// exact gradient: a forward convolution and a kernel gradient per layer, where the generic
@@ -243,55 +268,82 @@ impl PatchDiscriminator2d {
         // Each hidden layer's input dims and output (whose sign is the LeakyReLU branch).
         let mut layers = Vec::with_capacity(self.blocks.len());
         let mut x = mixed;
-        for conv in &self.blocks {
-            let convolved = op::conv2d(&x, &conv.weight().detach(), conv.config())?;
-            let y = match conv.bias() {
-                Some(bias) => bias_leaky_relu(&convolved, &bias.detach(), LEAKY_SLOPE)?,
-                None => leaky_relu(&convolved, LEAKY_SLOPE)?,
-            };
-            layers.push((x.dims4()?, y.clone()));
+        for layer in &self.blocks {
+            let convolved = Self::conv(&x, &layer.weight.detach())?;
+            let y = bias_leaky_relu(&convolved, &layer.bias.detach(), LEAKY_SLOPE)?;
+            layers.push((x.dims().to_vec(), y.clone()));
             x = y;
         }
-        let (n, _, h, w) = x.dims4()?;
-        let cfg = self.tail.config();
-        let (_, _, kh, kw) = self.tail.weight().dims4()?;
-        let out_side = |side: usize, k: usize| (side + 2 * cfg.padding - k) / cfg.stride + 1;
-        let out_dims = (n, 1, out_side(h, kh), out_side(w, kw));
-        // d sum(D) / d (tail output) is all ones.
+        // d sum(D) / d (tail output) is all ones; the tail's output has one channel and is
+        // `KERNEL - 1` smaller along each spatial axis.
+        let mut out_dims = x.dims().to_vec();
+        out_dims[1] = 1;
+        for side in &mut out_dims[2..] {
+            *side = *side + 1 - KERNEL;
+        }
         let ones = Tensor::ones(out_dims, x.dtype(), x.device())?;
-        let mut grad = op::conv2d_grad_input(&ones, self.tail.weight(), cfg, x.dims4()?)?;
-        for (conv, (input_dims, output)) in self.blocks.iter().zip(layers).rev() {
+        let mut grad = Self::conv_grad_input(&ones, &self.tail.weight, x.dims())?;
+        for (layer, (input_dims, output)) in self.blocks.iter().zip(layers).rev() {
             let pre = leaky_grad(&grad, &output, LEAKY_SLOPE)?;
-            grad = op::conv2d_grad_input(&pre, conv.weight(), conv.config(), input_dims)?;
+            grad = Self::conv_grad_input(&pre, &layer.weight, &input_dims)?;
         }
         penalty_of_gradient(&grad, penalty)
     }
 
-    /// Errors unless `xs` is at least the receptive field along both axes.
+    /// The unpadded stride-1 convolution of the critic's layers over `AXES` axes.
+    fn conv(xs: &Tensor, weight: &Tensor) -> Result<Tensor> {
+        if AXES == 2 {
+            op::conv2d(xs, weight, ConvConfig::default())
+        } else {
+            op::conv3d(xs, weight, ConvConfig::default())
+        }
+    }
+
+    /// The input gradient of [`Self::conv`] for an input of `input_dims`.
+    fn conv_grad_input(grad_out: &Tensor, weight: &Tensor, input_dims: &[usize]) -> Result<Tensor> {
+        let cfg = ConvConfig::default();
+        if AXES == 2 {
+            op::conv2d_grad_input(grad_out, weight, cfg, input_dims)
+        } else {
+            op::conv3d_grad_input(grad_out, weight, cfg, input_dims)
+        }
+    }
+
+    /// Errors unless `xs` has `AXES` spatial axes, each at least the receptive field.
     fn check_input(&self, xs: &Tensor) -> Result<()> {
-        let (_, _, h, w) = xs.dims4()?;
         let field = self.config.receptive_field();
-        if h < field || w < field {
+        let what = if AXES == 2 { "images" } else { "volumes" };
+        if xs.rank() != AXES + 2 {
             return Err(invalid(
-                "PatchDiscriminator2d input",
-                format!("{h}x{w} is smaller than the receptive field {field}"),
+                "PatchDiscriminator input",
+                format!(
+                    "expected {what} with {AXES} spatial axes, got {:?}",
+                    xs.shape()
+                ),
+            ));
+        }
+        if xs.dims()[2..].iter().any(|&side| side < field) {
+            return Err(invalid(
+                "PatchDiscriminator input",
+                format!(
+                    "{:?} is smaller than the receptive field {field} along an axis",
+                    &xs.dims()[2..]
+                ),
             ));
         }
         Ok(())
     }
 }
 
-impl Module for PatchDiscriminator2d {
+impl<const AXES: usize> Module for PatchDiscriminator<AXES> {
     fn forward(&self, xs: &Tensor) -> candle_core::Result<Tensor> {
         self.check_input(xs)?;
         let mut x = xs.clone();
-        for conv in &self.blocks {
-            let convolved = op::conv2d(&x, conv.weight(), conv.config())?;
-            x = match conv.bias() {
-                Some(bias) => bias_leaky_relu(&convolved, bias, LEAKY_SLOPE)?,
-                None => leaky_relu(&convolved, LEAKY_SLOPE)?,
-            };
+        for layer in &self.blocks {
+            let convolved = Self::conv(&x, &layer.weight)?;
+            x = bias_leaky_relu(&convolved, &layer.bias, LEAKY_SLOPE)?;
         }
-        self.tail.forward(&x)
+        let bias_shape = vec![1; AXES + 2];
+        Self::conv(&x, &self.tail.weight)?.broadcast_add(&self.tail.bias.reshape(bias_shape)?)
     }
 }

@@ -1,5 +1,5 @@
 //! The networks of SinGRAV on candle: a 3D convolution, the 3D generator, the 2D patch
-//! discriminator, the final 2D upsampler, and WGAN-GP losses.
+//! discriminator (and its 3D twin over volumes), the final 2D upsampler, and WGAN-GP losses.
 //!
 //! candle has no 3D convolution; [`Conv3d`] (and [`functional::conv3d`]) fills that gap on the CPU
 //! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight. The
@@ -18,9 +18,10 @@
 //!   (`blocks.{i}.conv.weight`, `blocks.{i}.bn.running_mean`, `tail.bias`, ...).
 //! - Layers with batch norm implement `ModuleT` (`train = true` uses batch statistics and updates
 //!   the running ones); the others implement `Module`.
-//! - Losses are plain functions; randomness comes from a caller's RNG. The patch critic also
-//!   has its own [`PatchDiscriminator2d::critic_loss`] (real and fake in one forward pass) and
-//!   [`PatchDiscriminator2d::gradient_penalty`] (the WGAN-GP penalty as a first-order graph,
+//! - Losses are plain functions; randomness comes from a caller's RNG. The patch critic
+//!   ([`PatchDiscriminator2d`] of images, [`PatchDiscriminator3d`] of volumes) also has its own
+//!   [`PatchDiscriminator::critic_loss`] (real and fake in one forward pass) and
+//!   [`PatchDiscriminator::gradient_penalty`] (the WGAN-GP penalty as a first-order graph,
 //!   about twice as fast as the generic [`gradient_penalty`] and without candle's
 //!   `CANDLE_GRAD_DO_NOT_DETACH`).
 //!
@@ -64,7 +65,10 @@ pub mod functional {
 
 pub use active::ActiveSites;
 pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv2d, Conv3d, ConvConfig};
-pub use discriminator::{receptive_field, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+pub use discriminator::{
+    receptive_field, PatchDiscriminator, PatchDiscriminator2d, PatchDiscriminator2dConfig,
+    PatchDiscriminator3d, PatchDiscriminatorConfig,
+};
 pub use error::{Error, Result};
 pub use fused::bias_leaky_relu;
 pub use generator::{Generator3d, Generator3dConfig};

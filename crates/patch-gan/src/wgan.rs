@@ -79,7 +79,7 @@ const NORM_EPS: f64 = 1e-12;
 /// `CANDLE_GRAD_DO_NOT_DETACH` is set (non-empty, not `0`) before the thread's first backward
 /// pass; this function returns [`Error::SecondOrderDisabled`] when it is not set rather than a
 /// silently wrong gradient. Set it at program start. For the crate's own critic,
-/// [`PatchDiscriminator2d::gradient_penalty`](crate::PatchDiscriminator2d::gradient_penalty)
+/// [`PatchDiscriminator::gradient_penalty`](crate::PatchDiscriminator::gradient_penalty)
 /// gives the same penalty as a first-order graph: faster, and without the variable.
 ///
 /// ```

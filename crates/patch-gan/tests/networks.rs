@@ -7,7 +7,8 @@ use candle_core::{DType, Device, Module, ModuleT, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{
     receptive_field, upsample_bilinear2x, Generator3d, Generator3dConfig, PatchDiscriminator2d,
-    PatchDiscriminator2dConfig, Upsampler2d, Upsampler2dConfig,
+    PatchDiscriminator2dConfig, PatchDiscriminator3d, PatchDiscriminatorConfig, Upsampler2d,
+    Upsampler2dConfig,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -210,6 +211,96 @@ fn discriminator_rejects_images_smaller_than_its_field() {
     )
     .unwrap();
     assert!(d.forward(&random(&[1, 4, 10, 20], 7)).is_err());
+}
+
+/// The critic of volumes: PyTorch's Conv3d shapes under the 2D critic's names, a patch map
+/// `2 L` smaller along each axis whose values each see one field^3 cube, and with kernels that
+/// are zero outside their middle depth slice it is the 2D critic of those slices, run on every
+/// depth slice of the volume.
+#[test]
+fn volume_discriminator_is_the_image_critic_along_a_third_axis() {
+    let cfg = PatchDiscriminatorConfig {
+        layers: 3,
+        channels: 5,
+        in_channels: 4,
+    };
+    let varmap = VarMap::new();
+    let d3 = PatchDiscriminator3d::new(
+        &cfg,
+        VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu),
+    )
+    .unwrap();
+    let s = shapes(&varmap);
+    assert_eq!(s["blocks.0.conv.weight"], [5, 4, 3, 3, 3]);
+    assert_eq!(s["blocks.1.conv.weight"], [5, 5, 3, 3, 3]);
+    assert_eq!(s["tail.weight"], [1, 5, 3, 3, 3]);
+    assert_eq!(s.len(), 6);
+    let (d, h, w) = (9, 10, 8);
+    let x = random(&[2, 4, d, h, w], 9);
+    let map = d3.forward(&x).unwrap();
+    assert_eq!(map.dims(), &[2, 1, d - 6, h - 6, w - 6]);
+
+    // One voxel reaches exactly the outputs whose field^3 window covers it.
+    let field = receptive_field(cfg.layers);
+    let (pz, py, px) = (4, 5, 3);
+    let bump = Tensor::zeros((2, 4, d, h, w), DType::F64, &Device::Cpu)
+        .unwrap()
+        .slice_assign(
+            &[1..2, 2..3, pz..pz + 1, py..py + 1, px..px + 1],
+            &Tensor::ones((1, 1, 1, 1, 1), DType::F64, &Device::Cpu).unwrap(),
+        )
+        .unwrap();
+    let hits = changed(&map, &d3.forward(&(&x + bump).unwrap()).unwrap());
+    let (od, oh, ow) = (d - 6, h - 6, w - 6);
+    let expected: Vec<usize> = (0..2 * od * oh * ow)
+        .filter(|&i| {
+            let (b, z, y, x) = (i / (od * oh * ow), i / (oh * ow) % od, i / ow % oh, i % ow);
+            b == 1
+                && (z..z + field).contains(&pz)
+                && (y..y + field).contains(&py)
+                && (x..x + field).contains(&px)
+        })
+        .collect();
+    assert_eq!(hits, expected);
+
+    // Kernels flat in depth: the 2D critic of each depth slice.
+    let flat_varmap = VarMap::new();
+    let d2 = PatchDiscriminator2d::new(
+        &cfg,
+        VarBuilder::from_varmap(&flat_varmap, DType::F64, &Device::Cpu),
+    )
+    .unwrap();
+    let volume_vars = varmap.data().lock().unwrap();
+    for (name, var2) in flat_varmap.data().lock().unwrap().iter() {
+        let var3 = &volume_vars[name];
+        if var3.rank() == 1 {
+            var3.set(var2.as_tensor()).unwrap();
+            continue;
+        }
+        let middle = var3.as_tensor().narrow(2, 1, 1).unwrap();
+        var2.set(&middle.squeeze(2).unwrap()).unwrap();
+        let flat = middle.pad_with_zeros(2, 1, 1).unwrap();
+        var3.set(&flat).unwrap();
+    }
+    let map = d3.forward(&x).unwrap();
+    for z in 0..od {
+        let slice = x.narrow(2, z + cfg.layers, 1).unwrap().squeeze(2).unwrap();
+        let want = d2.forward(&slice).unwrap();
+        let got = map.narrow(2, z, 1).unwrap().squeeze(2).unwrap();
+        let diff = (got - want)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f64>()
+            .unwrap();
+        assert!(diff < 1e-12, "depth slice {z}: {diff}");
+    }
+
+    // Images, or volumes smaller than the field, are refused.
+    assert!(d3.forward(&random(&[1, 4, 9, 9], 10)).is_err());
+    assert!(d3.forward(&random(&[1, 4, 9, 6, 9], 10)).is_err());
 }
 
 #[test]

@@ -8,7 +8,7 @@ use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{
     critic_loss, generator_loss, gradient_penalty, GradientNorm, GradientPenalty,
-    PatchDiscriminator2d,
+    PatchDiscriminator, PatchDiscriminator2d, PatchDiscriminatorConfig,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -63,8 +63,8 @@ fn penalty_of_a_linear_critic_is_known() {
 
 /// The generic penalty as a function of the critic's weights, with the interpolation drawn
 /// from a fixed seed.
-fn penalty(
-    critic: &PatchDiscriminator2d,
+fn penalty<const AXES: usize>(
+    critic: &PatchDiscriminator<AXES>,
     real: &Tensor,
     fake: &Tensor,
     cfg: GradientPenalty,
@@ -77,14 +77,14 @@ fn penalty(
 #[test]
 fn penalty_gradient_matches_finite_differences() {
     // Three channels run every layer on the im2col kernel; every weight is checked.
-    support::penalty_gradient_matches_finite_differences(support::SMALL_CRITIC, 1, penalty);
+    support::penalty_gradient_matches_finite_differences::<2>(support::SMALL_CRITIC, 1, penalty);
 }
 
 #[test]
 fn penalty_gradient_matches_finite_differences_through_winograd() {
     // 32 channels in and out send the middle layer through the Winograd kernel; every 97th
     // weight is checked (all 10k would take minutes).
-    support::penalty_gradient_matches_finite_differences(support::WIDE_CRITIC, 97, penalty);
+    support::penalty_gradient_matches_finite_differences::<2>(support::WIDE_CRITIC, 97, penalty);
 }
 
 /// The first-order penalty against the double backward: the same value and the same gradient
@@ -92,42 +92,63 @@ fn penalty_gradient_matches_finite_differences_through_winograd() {
 /// and the Winograd kernels and both norms.
 #[test]
 fn first_order_penalty_equals_the_double_backward() {
-    enable_second_order();
     for cfg in [support::SMALL_CRITIC, support::WIDE_CRITIC] {
-        let varmap = VarMap::new();
-        let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
-        let critic = PatchDiscriminator2d::new(&cfg, vb).unwrap();
         let side = 2 * cfg.layers + 3;
-        let real = random(&[3, cfg.in_channels, side, side + 1], 7);
-        let fake = random(&[3, cfg.in_channels, side, side + 1], 8);
-        for norm in [GradientNorm::PerPixel, GradientNorm::PerImage] {
-            let gp_cfg = GradientPenalty { weight: 0.3, norm };
-            let generic = penalty(&critic, &real, &fake, gp_cfg);
-            let first = support::first_order_penalty(&critic, &real, &fake, gp_cfg);
-            let (a, b) = (
-                generic.to_scalar::<f64>().unwrap(),
-                first.to_scalar::<f64>().unwrap(),
-            );
-            assert!((a - b).abs() <= 1e-12 * a.abs(), "{norm:?}: {a} vs {b}");
-            let (ga, gb) = (generic.backward().unwrap(), first.backward().unwrap());
-            for var in varmap.all_vars() {
-                match (ga.get(&var), gb.get(&var)) {
-                    (None, None) => assert_eq!(var.rank(), 1, "only biases get no gradient"),
-                    (Some(x), Some(y)) => {
-                        let (scale, diff) = (max_abs(x), max_abs_diff(x, y));
-                        assert!(
-                            scale > 0.0 && diff <= 1e-10 * scale,
-                            "{:?}: {diff} of {scale}",
-                            var.shape()
-                        );
-                    }
-                    (x, y) => panic!(
-                        "{:?}: gradient {} vs {}",
-                        var.shape(),
-                        x.is_some(),
-                        y.is_some()
-                    ),
+        assert_first_order_equals_double_backward::<2>(cfg, &[side, side + 1]);
+    }
+}
+
+/// As above for the critic of volumes, on the im2col kernel (3 channels) and the Winograd
+/// kernel (32).
+#[test]
+fn first_order_penalty_of_a_volume_critic_equals_the_double_backward() {
+    let narrow = PatchDiscriminatorConfig {
+        layers: 3,
+        ..support::SMALL_CRITIC
+    };
+    for cfg in [narrow, support::WIDE_CRITIC] {
+        let side = 2 * cfg.layers + 2;
+        assert_first_order_equals_double_backward::<3>(cfg, &[side, side + 1, side]);
+    }
+}
+
+fn assert_first_order_equals_double_backward<const AXES: usize>(
+    cfg: PatchDiscriminatorConfig,
+    sides: &[usize],
+) {
+    enable_second_order();
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
+    let critic = PatchDiscriminator::<AXES>::new(&cfg, vb).unwrap();
+    let shape: Vec<usize> = [3, cfg.in_channels].iter().chain(sides).copied().collect();
+    let (real, fake) = (random(&shape, 7), random(&shape, 8));
+    for norm in [GradientNorm::PerPixel, GradientNorm::PerImage] {
+        let gp_cfg = GradientPenalty { weight: 0.3, norm };
+        let generic = penalty(&critic, &real, &fake, gp_cfg);
+        let first = support::first_order_penalty(&critic, &real, &fake, gp_cfg);
+        let (a, b) = (
+            generic.to_scalar::<f64>().unwrap(),
+            first.to_scalar::<f64>().unwrap(),
+        );
+        assert!((a - b).abs() <= 1e-12 * a.abs(), "{norm:?}: {a} vs {b}");
+        let (ga, gb) = (generic.backward().unwrap(), first.backward().unwrap());
+        for var in varmap.all_vars() {
+            match (ga.get(&var), gb.get(&var)) {
+                (None, None) => assert_eq!(var.rank(), 1, "only biases get no gradient"),
+                (Some(x), Some(y)) => {
+                    let (scale, diff) = (max_abs(x), max_abs_diff(x, y));
+                    assert!(
+                        scale > 0.0 && diff <= 1e-10 * scale,
+                        "{:?}: {diff} of {scale}",
+                        var.shape()
+                    );
                 }
+                (x, y) => panic!(
+                    "{:?}: gradient {} vs {}",
+                    var.shape(),
+                    x.is_some(),
+                    y.is_some()
+                ),
             }
         }
     }

@@ -82,6 +82,19 @@ pub struct TrainConfig {
     /// used) is the paper's image-only training.
     #[serde(default)]
     pub lambda_fitted: f64,
+    /// Weight of the 3D patch critic's adversarial term at every 3D scale (3inGAN trains with
+    /// such a critic beside the 2D ones): a [`patch_gan::PatchDiscriminator3d`] of the 2D
+    /// critics' layers and channels judges a generated volume's per-voxel opacity (and with
+    /// `volume_critic_colour` its opacity-weighted colour) against the fitted volume's (see
+    /// `lambda_fitted`; it needs one too), with WGAN-GP steps of its own beside each 2D critic
+    /// step. 0 (every preset's default, and runs made before it existed): no 3D critic.
+    #[serde(default)]
+    pub lambda_volume_critic: f64,
+    /// The 3D critic also sees opacity-weighted colour, not only opacity. Off by default: a
+    /// fit's colour is unconstrained wherever no view sees it (inside matter, under the
+    /// ground), and a critic that asks for it puts that noise into the samples.
+    #[serde(default)]
+    pub volume_critic_colour: bool,
     /// Weight of the opacity reconstruction at every 3D scale: `lambda_opacity * mse(opacity,
     /// alpha)` between renderings of V*_n and the dataset's alpha. Colour alone cannot tell a
     /// grey stone from a half-transparent purple one in front of green grass, and the pyramid
@@ -369,6 +382,8 @@ impl TrainConfig {
             lambda_depth: 30.0,
             lambda_swd: 1.0,
             lambda_fitted: 0.0,
+            lambda_volume_critic: 0.0,
+            volume_critic_colour: false,
             lambda_opacity: LAMBDA_OPACITY,
             critic_opacity: true,
             lambda_colour: LAMBDA_COLOUR,
@@ -615,6 +630,7 @@ impl TrainConfig {
     /// Checks that the sizes agree and every setting is in range.
     pub fn validate(&self) -> Result<()> {
         check_weight("lambda_fitted", self.lambda_fitted)?;
+        check_weight("lambda_volume_critic", self.lambda_volume_critic)?;
         check_weight("lambda_height_profile", self.lambda_height_profile)?;
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;

@@ -86,6 +86,17 @@ fn assert_same_tensors(a: &HashMap<String, Tensor>, b: &HashMap<String, Tensor>)
     }
 }
 
+/// An observer that stops the run after `iteration` iterations of `scale`, as a kill would.
+fn stop_at(scale: usize, iteration: usize) -> impl FnMut(&Progress) -> Control {
+    move |p: &Progress| {
+        if p.scale == scale && p.iteration == iteration {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    }
+}
+
 /// The error of a training run that must fail.
 fn train_failure(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> Error {
     train(config, data, run, options, &Device::Cpu, &mut |_| {
@@ -297,13 +308,7 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
 
     // Killed in scale 2 after iteration 3: the last checkpoint is from iteration 2.
     let killed = tmp.path().join("killed");
-    let mut stop = |p: &Progress| {
-        if p.scale == 2 && p.iteration == 3 {
-            Control::Stop
-        } else {
-            Control::Continue
-        }
-    };
+    let mut stop = stop_at(2, 3);
     let outcome = train(
         &config,
         &data,
@@ -819,4 +824,82 @@ fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
     }
     .validate()
     .is_err());
+}
+
+/// A 3D critic judges the generated volumes against a fitted volume: its losses are logged at
+/// the 3D scales' adversarial iterations (and nowhere else), it changes what the generators
+/// learn, its weights and optimiser are in mid-scale checkpoints, and a killed run resumes to
+/// the uninterrupted weights. Without a fitted volume it is refused by name.
+#[test]
+fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let fitted = tmp.path().join("fitted.safetensors");
+    let raw = Tensor::randn(0f32, 1.0, (4, 8, 8, 8), &Device::Cpu).unwrap();
+    let activation = micro().activation();
+    radiance_volume::RadianceVolume::from_raw(&raw, radiance_volume::Aabb::CUBE, &activation)
+        .unwrap()
+        .save_safetensors(&fitted)
+        .unwrap();
+    let options = RunOptions {
+        fitted_volume: Some(fitted.clone()),
+        ..RunOptions::default()
+    };
+    // The critic alone, without the 3D comparison of the reconstruction.
+    let config = TrainConfig {
+        lambda_volume_critic: 1.0,
+        checkpoint_iterations: 2,
+        ..micro()
+    };
+    let whole = tmp.path().join("whole");
+    let (_, steps) = run_with(&config, &data, &whole, &options);
+    let volume_scales = config.volume_sizes.len();
+    for (scale, losses) in &steps {
+        let judged = *scale <= volume_scales && losses.critic.is_some();
+        assert_eq!(losses.volume_critic.is_some(), judged, "scale {scale}");
+        assert_eq!(losses.volume_penalty.is_some(), judged, "scale {scale}");
+        assert_eq!(losses.volume_adversarial.is_some(), judged, "scale {scale}");
+        assert!(losses.fitted.is_none());
+        for value in [
+            losses.volume_critic,
+            losses.volume_penalty,
+            losses.volume_adversarial,
+        ] {
+            assert!(value.is_none_or(f32::is_finite));
+        }
+    }
+    assert!(steps.iter().any(|(_, l)| l.volume_critic.is_some()));
+
+    let without = tmp.path().join("without");
+    run_to_end(&micro(), &data, &without);
+    let (a, b) = (checkpoint_tensors(&whole), checkpoint_tensors(&without));
+    let values = |t: &Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
+    let changed = a
+        .keys()
+        .filter(|name| name.starts_with("g1."))
+        .any(|name| values(&a[name]) != values(&b[name]));
+    assert!(changed, "the 3D critic changed nothing in G_1");
+
+    // Killed in scale 2 after iteration 3: the checkpoint of iteration 2 holds the 3D critic.
+    let killed = tmp.path().join("killed");
+    let mut stop = stop_at(2, 3);
+    let outcome = train(&config, &data, &killed, &options, &Device::Cpu, &mut stop).unwrap();
+    assert!(matches!(outcome, TrainOutcome::Stopped));
+    let saved = checkpoint_tensors(&killed);
+    assert!(saved.contains_key("d3.tail.weight"));
+    assert!(saved.keys().any(|name| name.starts_with("opt_d3.")));
+    let resumed = RunOptions {
+        resume: true,
+        ..options.clone()
+    };
+    run_with(&config, &data, &killed, &resumed);
+    assert_same_tensors(&checkpoint_tensors(&whole), &checkpoint_tensors(&killed));
+
+    let err = train_error(
+        &config,
+        &data,
+        &tmp.path().join("none"),
+        &RunOptions::default(),
+    );
+    assert!(err.contains("lambda_volume_critic"), "{err}");
 }

@@ -64,7 +64,7 @@ fn check_bias(weight: &Tensor, bias: Option<&Tensor>) -> Result<()> {
 
 /// The weight `(C_out, C_in, k, ..., k)` (`spatial_axes` kernel axes) and optional bias of a new
 /// layer under `vb`, with PyTorch's default init.
-fn layer_tensors(
+pub(crate) fn layer_tensors(
     in_channels: usize,
     out_channels: usize,
     kernel: usize,

@@ -101,31 +101,69 @@ pub(crate) fn conv2d_grad_input(
     grad_out: &Tensor,
     kernel: &Tensor,
     cfg: ConvConfig,
-    input_dims: (usize, usize, usize, usize),
+    input_dims: &[usize],
 ) -> Result<Tensor> {
-    let (n, c_in, h, w) = input_dims;
+    let &[n, c_in, h, w] = input_dims else {
+        return Err(invalid(
+            "input",
+            format!("expected (N, C, H, W), got {input_dims:?}"),
+        ));
+    };
     let (n_out, c_out, h_out, w_out) = grad_out.dims4()?;
     let (kc_out, kc_in, kh, kw) = kernel.dims4()?;
     let spec = Spec {
         padding: [0, cfg.padding, cfg.padding],
         stride: cfg.stride,
     };
-    let x_shape = Shape::from((n, c_in, 1, h, w));
-    let kernel = kernel.reshape((kc_out, kc_in, 1, kh, kw))?;
+    let grad = grid_grad_input(
+        &grad_out.reshape((n_out, c_out, 1, h_out, w_out))?,
+        &kernel.reshape((kc_out, kc_in, 1, kh, kw))?,
+        spec,
+        Shape::from((n, c_in, 1, h, w)),
+    )?;
+    Ok(grad.reshape(input_dims)?)
+}
+
+/// The input gradient of [`conv3d`] on the CPU, as [`conv2d_grad_input`] for an `x` of
+/// `input_dims` `(N, C_in, D, H, W)` (PyTorch's `conv_transpose3d` of `grad_out`).
+pub(crate) fn conv3d_grad_input(
+    grad_out: &Tensor,
+    kernel: &Tensor,
+    cfg: ConvConfig,
+    input_dims: &[usize],
+) -> Result<Tensor> {
+    grid_grad_input(
+        grad_out,
+        kernel,
+        Spec::uniform(cfg),
+        Shape::from(input_dims.to_vec()),
+    )
+}
+
+/// The input gradient of the grid convolution of an `x` of shape `x_shape` (5D) by `kernel`
+/// (5D), after checking that `grad_out` is that convolution's output shape.
+fn grid_grad_input(
+    grad_out: &Tensor,
+    kernel: &Tensor,
+    spec: Spec,
+    x_shape: Shape,
+) -> Result<Tensor> {
     let g = geometry(&x_shape, kernel.shape(), spec)?;
-    if g.output() != [1, h_out, w_out] || n_out != n || c_out != kc_out {
+    let [d_out, h_out, w_out] = g.output();
+    let expected = [g.batch, g.c_out, d_out, h_out, w_out];
+    if grad_out.dims() != expected {
         return Err(invalid(
             "output gradient",
             format!(
-                "{:?} does not match the output of a {input_dims:?} input and a {:?} kernel",
+                "{:?} does not match the output {expected:?} of a {x_shape:?} input and a {:?} \
+                 kernel",
                 grad_out.shape(),
                 kernel.shape()
             ),
         ));
     }
-    let grad_out = grad_out.reshape((n, c_out, 1, h_out, w_out))?;
     let op = GradInputOp(Domain::Grid(spec), x_shape);
-    Ok(apply(&grad_out, &kernel, op)?.reshape(input_dims)?)
+    Ok(apply(grad_out, kernel, op)?)
 }
 
 /// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public

@@ -2,7 +2,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use patch_gan::{GradientNorm, GradientPenalty, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+use patch_gan::{GradientNorm, GradientPenalty, PatchDiscriminator, PatchDiscriminatorConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -12,25 +12,38 @@ use super::{check_finite_differences_every, random};
 pub const PENALTY_SEED: u64 = 42;
 
 /// Two layers of three channels: every layer on the im2col kernel.
-pub const SMALL_CRITIC: PatchDiscriminator2dConfig = PatchDiscriminator2dConfig {
+pub const SMALL_CRITIC: PatchDiscriminatorConfig = PatchDiscriminatorConfig {
     layers: 2,
     channels: 3,
     in_channels: 2,
 };
 
 /// Three layers of 32 channels: the middle layer on the Winograd kernel.
-pub const WIDE_CRITIC: PatchDiscriminator2dConfig = PatchDiscriminator2dConfig {
+pub const WIDE_CRITIC: PatchDiscriminatorConfig = PatchDiscriminatorConfig {
     layers: 3,
     channels: 32,
     in_channels: 2,
 };
 
 /// A penalty as a function of the critic's weights (interpolation drawn from [`PENALTY_SEED`]).
-pub type PenaltyFn = fn(&PatchDiscriminator2d, &Tensor, &Tensor, GradientPenalty) -> Tensor;
+pub type PenaltyFn<const AXES: usize> =
+    fn(&PatchDiscriminator<AXES>, &Tensor, &Tensor, GradientPenalty) -> Tensor;
+
+/// A batch of `n` random inputs of `channels` with `AXES` spatial axes of `side`.
+pub fn random_batch<const AXES: usize>(
+    n: usize,
+    channels: usize,
+    side: usize,
+    seed: u64,
+) -> Tensor {
+    let mut shape = vec![n, channels];
+    shape.extend([side; AXES]);
+    random(&shape, seed)
+}
 
 /// The critic's own first-order penalty, a [`PenaltyFn`].
-pub fn first_order_penalty(
-    critic: &PatchDiscriminator2d,
+pub fn first_order_penalty<const AXES: usize>(
+    critic: &PatchDiscriminator<AXES>,
     real: &Tensor,
     fake: &Tensor,
     cfg: GradientPenalty,
@@ -39,19 +52,19 @@ pub fn first_order_penalty(
     critic.gradient_penalty(real, fake, cfg, &mut rng).unwrap()
 }
 
-/// Checks every `stride`-th entry of every weight and bias of a critic of `cfg` (f64), with
-/// both norms, and that the penalty reaches every conv weight.
-pub fn penalty_gradient_matches_finite_differences(
-    cfg: PatchDiscriminator2dConfig,
+/// Checks every `stride`-th entry of every weight and bias of a critic of `cfg` over `AXES`
+/// spatial axes (f64), with both norms, and that the penalty reaches every conv weight.
+pub fn penalty_gradient_matches_finite_differences<const AXES: usize>(
+    cfg: PatchDiscriminatorConfig,
     stride: usize,
-    penalty: PenaltyFn,
+    penalty: PenaltyFn<AXES>,
 ) {
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
-    let critic = PatchDiscriminator2d::new(&cfg, vb).unwrap();
+    let critic = PatchDiscriminator::<AXES>::new(&cfg, vb).unwrap();
     let side = 2 * cfg.layers + 2;
-    let real = random(&[2, 2, side, side], 5);
-    let fake = random(&[2, 2, side, side], 6);
+    let real = random_batch::<AXES>(2, cfg.in_channels, side, 5);
+    let fake = random_batch::<AXES>(2, cfg.in_channels, side, 6);
     for norm in [GradientNorm::PerPixel, GradientNorm::PerImage] {
         let gp_cfg = GradientPenalty { weight: 0.1, norm };
         let grads = penalty(&critic, &real, &fake, gp_cfg).backward().unwrap();
@@ -79,7 +92,7 @@ pub fn penalty_gradient_matches_finite_differences(
     let grads = penalty(&critic, &real, &fake, GradientPenalty::default())
         .backward()
         .unwrap();
-    for var in varmap.all_vars().iter().filter(|v| v.rank() == 4) {
+    for var in varmap.all_vars().iter().filter(|v| v.rank() == AXES + 2) {
         let g = grads.get(var).expect("every conv weight gets a gradient");
         let total = g
             .abs()

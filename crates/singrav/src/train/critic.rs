@@ -1,10 +1,10 @@
-//! The patch critic of one scale and its WGAN-GP update.
+//! The patch critics of one scale (of renderings, and of volumes) and their WGAN-GP update.
 
 use std::collections::HashMap;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use patch_gan::{GradientPenalty, PatchDiscriminator2d, PatchDiscriminator2dConfig};
+use patch_gan::{GradientPenalty, PatchDiscriminator, PatchDiscriminatorConfig};
 
 use super::volume_scale::{pick_views, select};
 use crate::config::TrainConfig;
@@ -12,14 +12,18 @@ use crate::error::{Error, Result};
 use crate::model::{copy_matching, named_vars, seeded_init};
 use crate::optim::Adam;
 
-/// A scale's critic, its variables and its optimiser.
-pub(super) struct Critic {
-    pub net: PatchDiscriminator2d,
+/// A scale's critic over `AXES` spatial axes (2: renderings, 3: volumes), its variables and
+/// its optimiser.
+pub(super) struct Critic<const AXES: usize = 2> {
+    pub net: PatchDiscriminator<AXES>,
     pub vars: VarMap,
     pub opt: Adam,
 }
 
-impl Critic {
+/// The critic of a scale's volumes (opacity and opacity-weighted colour per voxel).
+pub(super) type VolumeCritic = Critic<3>;
+
+impl<const AXES: usize> Critic<AXES> {
     /// A critic over `in_channels`, seeded from `rng`, then copied from `previous` (the last
     /// scale's critic) where shapes agree.
     pub fn new(
@@ -30,13 +34,15 @@ impl Critic {
         rng: &mut impl rand::Rng,
     ) -> Result<Self> {
         let vars = VarMap::new();
-        let cfg = PatchDiscriminator2dConfig {
+        let cfg = PatchDiscriminatorConfig {
             layers: config.layers,
             channels: config.channels,
             in_channels,
         };
-        let net =
-            PatchDiscriminator2d::new(&cfg, VarBuilder::from_varmap(&vars, DType::F32, device))?;
+        let net = PatchDiscriminator::<AXES>::new(
+            &cfg,
+            VarBuilder::from_varmap(&vars, DType::F32, device),
+        )?;
         seeded_init(&vars, rng)?;
         if let Some(previous) = previous {
             copy_matching(previous, &vars)?;
@@ -77,6 +83,13 @@ impl Critic {
         Ok((loss.to_scalar::<f32>()?, gp.to_scalar::<f32>()?))
     }
 
+    /// The generator's adversarial loss on a fake batch (differentiable).
+    pub fn generator_loss(&self, fake: &Tensor) -> Result<Tensor> {
+        Ok(patch_gan::generator_loss(&self.net.score(fake)?)?)
+    }
+}
+
+impl Critic<2> {
     /// The critic's part of an iteration: `config.d_steps` steps, each on `batch_views`
     /// random real views against the fake batch `fake_batch(views)` of as many random views;
     /// returns the mean critic loss and penalty.
@@ -99,10 +112,5 @@ impl Critic {
         }
         let steps = config.d_steps as f32;
         Ok((critic_sum / steps, penalty_sum / steps))
-    }
-
-    /// The generator's adversarial loss on a fake batch (differentiable).
-    pub fn generator_loss(&self, fake: &Tensor) -> Result<Tensor> {
-        Ok(patch_gan::generator_loss(&self.net.score(fake)?)?)
     }
 }

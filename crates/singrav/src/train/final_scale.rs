@@ -10,7 +10,7 @@ use rand::Rng;
 use swd_loss::{TextureLoss, Vgg19};
 
 use super::critic::Critic;
-use super::run::Stage;
+use super::run::{Stage, StageParts};
 use super::texture::{texture_loss, SwdExtractor};
 use super::volume_scale::{mse, pick_views, select};
 use super::StepLosses;
@@ -191,7 +191,11 @@ impl Stage for FinalScale<'_> {
         Ok(vec![row])
     }
 
-    fn parts(&mut self) -> (&mut Critic, &mut Adam) {
-        (&mut self.critic, &mut self.opt)
+    fn parts(&mut self) -> StageParts<'_> {
+        StageParts {
+            critic: &mut self.critic,
+            volume_critic: None,
+            generator_opt: &mut self.opt,
+        }
     }
 }

@@ -50,6 +50,35 @@ impl FittedTarget {
         })
     }
 
+    /// The fitted volume as the 3D critic sees volumes: `(1, 1, s, s, s)` opacity per voxel,
+    /// and with `colour` `(1, 4, s, s, s)`, opacity-weighted colour after it (see
+    /// [`FittedTarget::volume_features`]).
+    pub fn features(&self, colour: bool) -> Result<Tensor> {
+        if colour {
+            Ok(Tensor::cat(&[&self.opacity, &self.weighted_rgb], 1)?)
+        } else {
+            Ok(self.opacity.clone())
+        }
+    }
+
+    /// The same features of raw generated volumes `(B, 4, s, s, s)`, colour weighted by each
+    /// volume's own opacity; differentiable. They are bounded in [0, 1], whatever the
+    /// densities.
+    pub fn volume_features(
+        &self,
+        raw: &Tensor,
+        activation: &Activation,
+        colour: bool,
+    ) -> Result<Tensor> {
+        let physical = activation.apply(raw)?;
+        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
+        if !colour {
+            return Ok(opacity);
+        }
+        let rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?;
+        Ok(Tensor::cat(&[&opacity, &rgb], 1)?)
+    }
+
     /// The mean squared difference of opacity plus that of opacity-weighted colour, the
     /// reconstruction's colour weighted by the *fitted* opacity (so that colour in what should
     /// be empty space costs nothing), for a raw `(1, 4, s, s, s)` reconstruction.
@@ -107,6 +136,14 @@ mod tests {
         let target = FittedTarget::new(&volume, 6, &Device::Cpu)?;
         let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
         assert!(same < 1e-10, "{same}");
+        // What the 3D critic sees of the fitted volume and of the same raw volume generated.
+        for (colour, channels) in [(false, 1), (true, 4)] {
+            let real = target.features(colour)?;
+            let generated = target.volume_features(&raw, &activation, colour)?;
+            assert_eq!(real.dims(), &[1, channels, 6, 6, 6]);
+            let diff = (real - generated)?.abs()?.max_all()?.to_scalar::<f32>()?;
+            assert!(diff < 1e-6, "{diff}");
+        }
         let other = target
             .loss(&(raw + 1.0)?, &activation)?
             .to_scalar::<f32>()?;

@@ -53,7 +53,7 @@ pub struct RunOptions {
     /// [`crate::SwdFeatures::Vgg19`]; required then, refused otherwise.
     pub vgg19_weights: Option<PathBuf>,
     /// A directly fitted volume (see [`crate::fit`]) for a configuration whose
-    /// `lambda_fitted` is positive; required then (unless resuming a run, which keeps its own
+    /// `lambda_fitted` or `lambda_volume_critic` is positive; required then (unless resuming a run, which keeps its own
     /// copy as `fitted.safetensors`), refused otherwise.
     pub fitted_volume: Option<PathBuf>,
     /// Test hook: before iteration `.1` (0-based) of scale `.0`, every weight of that scale's
@@ -100,6 +100,13 @@ pub struct StepLosses {
     /// Weighted height-profile loss of the generated scenes (3D scales' adversarial iterations
     /// of runs with `lambda_height_profile > 0`).
     pub height_profile: Option<f32>,
+    /// The 3D critic's loss `mean D3(fake) - mean D3(fitted)` (3D scales' adversarial
+    /// iterations of runs with `lambda_volume_critic > 0`).
+    pub volume_critic: Option<f32>,
+    /// The 3D critic's gradient penalty (weighted).
+    pub volume_penalty: Option<f32>,
+    /// The generator's weighted adversarial loss against the 3D critic.
+    pub volume_adversarial: Option<f32>,
 }
 
 /// What just happened, for progress display.

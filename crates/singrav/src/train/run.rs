@@ -7,7 +7,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use radiance_volume::RadianceVolume;
 
-use super::critic::Critic;
+use super::critic::{Critic, VolumeCritic};
 use super::final_scale::FinalScale;
 use super::fitted::load_fitted;
 use super::log::LossLog;
@@ -38,9 +38,51 @@ pub(super) trait Stage {
         rng: &mut rand_chacha::ChaCha8Rng,
         count: usize,
     ) -> Result<Vec<Vec<Tensor>>>;
-    /// The critic and the generator's optimiser (for checkpoints).
-    fn parts(&mut self) -> (&mut Critic, &mut Adam);
+    /// The critics and the generator's optimiser (for checkpoints).
+    fn parts(&mut self) -> StageParts<'_>;
 }
+
+/// What a stage trains beside its generator's weights, as a checkpoint saves it.
+pub(super) struct StageParts<'a> {
+    /// The 2D critic (checkpoint names `d.*`, its optimiser `opt_d.*`).
+    pub critic: &'a mut Critic,
+    /// The 3D critic, when the run has one (`d3.*`, `opt_d3.*`).
+    pub volume_critic: Option<&'a mut VolumeCritic>,
+    /// The generator's optimiser (`opt_g.*`).
+    pub generator_opt: &'a mut Adam,
+}
+
+impl StageParts<'_> {
+    /// Sets every optimiser's learning rate.
+    fn set_learning_rate(&mut self, rate: f64) {
+        self.critic.opt.set_learning_rate(rate);
+        if let Some(critic) = self.volume_critic.as_mut() {
+            critic.opt.set_learning_rate(rate);
+        }
+        self.generator_opt.set_learning_rate(rate);
+    }
+
+    /// The critics' weights by checkpoint name (`d.*`, `d3.*`).
+    fn critic_tensors(&self) -> HashMap<String, Tensor> {
+        let named = |prefix: &str, vars: &candle_nn::VarMap| {
+            var_tensors(vars)
+                .into_iter()
+                .map(|(name, t)| (format!("{prefix}{name}"), t))
+                .collect::<Vec<_>>()
+        };
+        let mut tensors: HashMap<_, _> = named(CRITIC_PREFIX, &self.critic.vars)
+            .into_iter()
+            .collect();
+        if let Some(critic) = &self.volume_critic {
+            tensors.extend(named(VOLUME_CRITIC_PREFIX, &critic.vars));
+        }
+        tensors
+    }
+}
+
+/// Checkpoint names of the 2D and 3D critics' weights.
+const CRITIC_PREFIX: &str = "d.";
+const VOLUME_CRITIC_PREFIX: &str = "d3.";
 
 /// How a call to [`train`] ended.
 pub enum TrainOutcome {
@@ -150,13 +192,24 @@ pub fn train(
     };
     write_config_json(config, &run_dir.join(CONFIG_FILE))?;
     let mut log = LossLog::open(run_dir, resume.then_some((state.scale, state.iteration)))?;
-    // The critic the next scale starts from, and the tensors a mid-scale resume restores.
-    let mut previous_critic = prefixed(&saved, "d.");
+    // The critics the next scale starts from (checkpoint names), and the tensors a mid-scale
+    // resume restores.
+    let mut previous_critics: HashMap<String, Tensor> = saved
+        .iter()
+        .filter(|(name, _)| {
+            name.starts_with(CRITIC_PREFIX) || name.starts_with(VOLUME_CRITIC_PREFIX)
+        })
+        .map(|(name, t)| (name.clone(), t.clone()))
+        .collect();
     let mut restore = (state.iteration > 0).then_some(&saved);
     for n in state.scale..=config.scales() {
         let mut setup = step_rng(config.seed, n, SETUP_STREAM);
         let fresh = restore.is_none();
+        let previous_critic = prefixed(&previous_critics, CRITIC_PREFIX);
+        let previous_volume_critic = prefixed(&previous_critics, VOLUME_CRITIC_PREFIX);
         let previous = (!previous_critic.is_empty()).then_some(&previous_critic);
+        let previous_volume =
+            (!previous_volume_critic.is_empty()).then_some(&previous_volume_critic);
         let mut stage: Box<dyn Stage + '_> = if n < config.scales() {
             let size = config.image_sizes[n - 1];
             let level = dataset.level(size, size, device)?;
@@ -192,7 +245,7 @@ pub fn train(
                     previous,
                     &mut setup,
                 )?
-                .with_fitted(fitted.as_ref())?,
+                .with_fitted(fitted.as_ref(), previous_volume, &mut setup)?,
             )
         } else {
             if fresh {
@@ -224,9 +277,7 @@ pub fn train(
             }
             // A function of the iteration alone, so a resumed run decays where it would have.
             let learning_rate = config.learning_rate_at(n, it);
-            let (critic, generator_opt) = stage.parts();
-            critic.opt.set_learning_rate(learning_rate);
-            generator_opt.set_learning_rate(learning_rate);
+            stage.parts().set_learning_rate(learning_rate);
             let losses = stage
                 .iteration(
                     it >= schedule.reconstruction_only,
@@ -276,7 +327,7 @@ pub fn train(
             PICTURE_SAMPLES,
         )?;
         crate::picture::write_grid(&picture, &rows)?;
-        previous_critic = var_tensors(&stage.parts().0.vars);
+        previous_critics = stage.parts().critic_tensors();
         drop(stage);
         state.scale_seconds.push(state.current_seconds);
         state.scale_peak_mib.push(super::peak_memory_mib());
@@ -284,7 +335,7 @@ pub fn train(
         state.scale = n + 1;
         state.iteration = 0;
         state.optimizer_steps = (0, 0);
-        save_boundary(&checkpoint_file, config, &state, &model, &previous_critic)?;
+        save_boundary(&checkpoint_file, config, &state, &model, &previous_critics)?;
         let progress = Progress {
             scale: n,
             scales: config.scales(),
@@ -348,6 +399,9 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("opacity reconstruction", losses.opacity),
         ("colour distribution", losses.colour_distribution),
         ("height profile", losses.height_profile),
+        ("3D critic loss", losses.volume_critic),
+        ("3D critic's gradient penalty", losses.volume_penalty),
+        ("3D adversarial loss", losses.volume_adversarial),
     ];
     for (what, value) in terms {
         if let Some(value) = value.filter(|v| !v.is_finite()) {
@@ -407,13 +461,13 @@ fn load_fitted_target(
     run_dir: &Path,
 ) -> Result<Option<(RadianceVolume, bool)>> {
     let copy = run_dir.join(FITTED_FILE);
-    if config.lambda_fitted == 0.0 {
+    if config.lambda_fitted == 0.0 && config.lambda_volume_critic == 0.0 {
         return match &options.fitted_volume {
             Some(path) => Err(invalid(
                 "fitted volume",
                 format!(
-                    "{} was given but the configuration's lambda_fitted is 0; set a positive \
-                     weight to train against it",
+                    "{} was given but the configuration's lambda_fitted and \
+                     lambda_volume_critic are 0; set a positive weight to train against it",
                     path.display()
                 ),
             )),
@@ -427,9 +481,9 @@ fn load_fitted_target(
             return Err(invalid(
                 "fitted volume",
                 format!(
-                    "lambda_fitted is {} but no fitted volume was given (volgen: --fitted FILE \
-                     or --fit)",
-                    config.lambda_fitted
+                    "lambda_fitted is {} and lambda_volume_critic {} but no fitted volume was \
+                     given (volgen: --fitted FILE or --fit)",
+                    config.lambda_fitted, config.lambda_volume_critic
                 ),
             ))
         }
@@ -459,14 +513,16 @@ fn save(
     let mut tensors = model.tensors();
     let mut state = state.clone();
     if let Some(stage) = stage {
-        let (critic, opt_g) = stage.parts();
-        for (name, t) in var_tensors(&critic.vars) {
-            tensors.insert(format!("d.{name}"), t);
-        }
-        let (g_state, g_steps) = opt_g.state("opt_g.");
-        let (d_state, d_steps) = critic.opt.state("opt_d.");
+        let parts = stage.parts();
+        tensors.extend(parts.critic_tensors());
+        let (g_state, g_steps) = parts.generator_opt.state("opt_g.");
+        let (d_state, d_steps) = parts.critic.opt.state("opt_d.");
         tensors.extend(g_state);
         tensors.extend(d_state);
+        if let Some(critic) = &parts.volume_critic {
+            // It steps with the 2D critic, so `d_steps` counts its steps too.
+            tensors.extend(critic.opt.state("opt_d3.").0);
+        }
         state.optimizer_steps = (g_steps, d_steps);
     }
     Checkpoint {
@@ -477,19 +533,17 @@ fn save(
     .save(path)
 }
 
-/// Saves the checkpoint at the end of a scale: weights and the finished critic (the next
-/// scale's critic starts from it).
+/// Saves the checkpoint at the end of a scale: weights and the finished critics (by checkpoint
+/// name; the next scale's critics start from them).
 fn save_boundary(
     path: &Path,
     config: &TrainConfig,
     state: &TrainState,
     model: &SinGrav,
-    critic: &HashMap<String, Tensor>,
+    critics: &HashMap<String, Tensor>,
 ) -> Result<()> {
     let mut tensors = model.tensors();
-    for (name, t) in critic {
-        tensors.insert(format!("d.{name}"), t.clone());
-    }
+    tensors.extend(critics.iter().map(|(name, t)| (name.clone(), t.clone())));
     Checkpoint {
         config: config.clone(),
         state: state.clone(),
@@ -510,14 +564,25 @@ fn restore_stage(
         path: path.to_path_buf(),
         why,
     };
-    let (critic, opt_g) = stage.parts();
-    load_into(&critic.vars, tensors, "d.", device).map_err(fail)?;
+    let parts = stage.parts();
+    load_into(&parts.critic.vars, tensors, CRITIC_PREFIX, device).map_err(fail)?;
     let (g_steps, d_steps) = state.optimizer_steps;
-    opt_g.restore(tensors, "opt_g.", g_steps).map_err(fail)?;
-    critic
+    parts
+        .generator_opt
+        .restore(tensors, "opt_g.", g_steps)
+        .map_err(fail)?;
+    parts
+        .critic
         .opt
         .restore(tensors, "opt_d.", d_steps)
         .map_err(fail)?;
+    if let Some(critic) = parts.volume_critic {
+        load_into(&critic.vars, tensors, VOLUME_CRITIC_PREFIX, device).map_err(fail)?;
+        critic
+            .opt
+            .restore(tensors, "opt_d3.", d_steps)
+            .map_err(fail)?;
+    }
     Ok(())
 }
 

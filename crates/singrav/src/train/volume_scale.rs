@@ -9,10 +9,10 @@ use radiance_volume::RadianceVolume;
 use rand::Rng;
 
 use super::colour::colour_distribution_loss;
-use super::critic::Critic;
+use super::critic::{Critic, VolumeCritic};
 use super::fitted::FittedTarget;
 use super::height_profile::height_profile_loss;
-use super::run::Stage;
+use super::run::{Stage, StageParts};
 use super::StepLosses;
 use crate::config::TrainConfig;
 use crate::dataset::DatasetLevel;
@@ -45,6 +45,9 @@ pub(super) struct VolumeScale<'a> {
     prev_reconstruction: Option<Tensor>,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
+    /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
+    /// `fitted`.
+    volume_critic: Option<VolumeCritic>,
 }
 
 /// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
@@ -106,16 +109,45 @@ impl<'a> VolumeScale<'a> {
             opt,
             prev_reconstruction,
             fitted: None,
+            volume_critic: None,
         })
     }
 
-    /// Also compares the reconstruction in 3D with `fitted` (resampled to this scale), weighted
-    /// by the configuration's `lambda_fitted`.
-    pub fn with_fitted(mut self, fitted: Option<&RadianceVolume>) -> Result<Self> {
+    /// Trains against `fitted` (resampled to this scale): the reconstruction is compared with
+    /// it in 3D, weighted by the configuration's `lambda_fitted`, and with a positive
+    /// `lambda_volume_critic` a 3D critic (seeded from `rng`, then copied from
+    /// `previous_volume_critic`, the last scale's, where shapes agree) judges the generated
+    /// volumes against it.
+    pub fn with_fitted(
+        mut self,
+        fitted: Option<&RadianceVolume>,
+        previous_volume_critic: Option<&HashMap<String, Tensor>>,
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
         let size = self.config.volume_sizes[self.n - 1];
         self.fitted = fitted
             .map(|volume| FittedTarget::new(volume, size, self.model.device()))
             .transpose()?;
+        if self.config.lambda_volume_critic > 0.0 {
+            if self.fitted.is_none() {
+                return Err(crate::error::invalid(
+                    "lambda_volume_critic",
+                    "the 3D critic judges against a fitted volume, and none was given",
+                ));
+            }
+            let channels = if self.config.volume_critic_colour {
+                VOLUME_CHANNELS
+            } else {
+                1
+            };
+            self.volume_critic = Some(VolumeCritic::new(
+                self.config,
+                channels,
+                previous_volume_critic,
+                self.model.device(),
+                rng,
+            )?);
+        }
         Ok(self)
     }
 
@@ -181,6 +213,21 @@ impl Stage for VolumeScale<'_> {
         };
         if let Some(draw) = &draw {
             let fake_volume = self.fake_volume(draw)?.detach();
+            if let (Some(critic), Some(fitted)) = (&mut self.volume_critic, &self.fitted) {
+                let colour = self.config.volume_critic_colour;
+                let real = fitted.features(colour)?;
+                let fake =
+                    fitted.volume_features(&fake_volume, &self.config.activation(), colour)?;
+                let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
+                for _ in 0..self.config.d_steps {
+                    let (c, p) = critic.step(&real, &fake, self.config.gp_weight, rng)?;
+                    critic_sum += c;
+                    penalty_sum += p;
+                }
+                let steps = self.config.d_steps as f32;
+                losses.volume_critic = Some(critic_sum / steps);
+                losses.volume_penalty = Some(penalty_sum / steps);
+            }
             let (renderer, cameras) = (&self.renderer, &self.level.cameras);
             let channels = self.real.dim(1)?;
             let batch = self.config.views(self.n).generated;
@@ -195,14 +242,26 @@ impl Stage for VolumeScale<'_> {
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
-        let mut height_sum = 0.0;
+        let (mut height_sum, mut volume_adversarial_sum) = (0.0, 0.0);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
                 let fake_views = pick_views(rng, views, self.config.views(self.n).generated);
+                let fake_volume = self.fake_volume(draw)?;
+                if let (Some(critic), Some(fitted)) = (&self.volume_critic, &self.fitted) {
+                    let features = fitted.volume_features(
+                        &fake_volume,
+                        &self.config.activation(),
+                        self.config.volume_critic_colour,
+                    )?;
+                    let loss =
+                        (critic.generator_loss(&features)? * self.config.lambda_volume_critic)?;
+                    volume_adversarial_sum += loss.to_scalar::<f32>()?;
+                    total = (total + loss)?;
+                }
                 let fake = critic_view(
                     &self.renderer,
-                    &self.fake_volume(draw)?,
+                    &fake_volume,
                     &self.cameras(&fake_views),
                     self.real.dim(1)?,
                 )?;
@@ -227,7 +286,7 @@ impl Stage for VolumeScale<'_> {
             }
             let rec_views = pick_views(rng, views, self.config.views(self.n).reconstruction);
             let reconstruction = self.reconstruction()?;
-            if let Some(fitted) = &self.fitted {
+            if let (Some(fitted), true) = (&self.fitted, self.config.lambda_fitted > 0.0) {
                 let loss = (fitted.loss(&reconstruction, &self.config.activation())?
                     * self.config.lambda_fitted)?;
                 fitted_sum += loss.to_scalar::<f32>()?;
@@ -263,7 +322,10 @@ impl Stage for VolumeScale<'_> {
         losses.color = color_sum / steps;
         losses.depth = self.config.use_depth.then_some(depth_sum / steps);
         losses.adversarial = adversarial.then_some(adversarial_sum / steps);
-        losses.fitted = self.fitted.is_some().then_some(fitted_sum / steps);
+        losses.fitted = (self.fitted.is_some() && self.config.lambda_fitted > 0.0)
+            .then_some(fitted_sum / steps);
+        losses.volume_adversarial =
+            (adversarial && self.volume_critic.is_some()).then_some(volume_adversarial_sum / steps);
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
         losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
             .then_some(colour_sum_generated / steps);
@@ -292,8 +354,12 @@ impl Stage for VolumeScale<'_> {
         Ok(vec![row])
     }
 
-    fn parts(&mut self) -> (&mut Critic, &mut Adam) {
-        (&mut self.critic, &mut self.opt)
+    fn parts(&mut self) -> StageParts<'_> {
+        StageParts {
+            critic: &mut self.critic,
+            volume_critic: self.volume_critic.as_mut(),
+            generator_opt: &mut self.opt,
+        }
     }
 }
 
