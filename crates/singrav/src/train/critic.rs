@@ -87,6 +87,25 @@ impl<const AXES: usize> Critic<AXES> {
     pub fn generator_loss(&self, fake: &Tensor) -> Result<Tensor> {
         Ok(patch_gan::generator_loss(&self.net.score(fake)?)?)
     }
+
+    /// The critic's part of an iteration: `config.d_steps` steps, each on the (real, fake)
+    /// batches `batches` draws from `rng`; returns the mean critic loss and penalty.
+    pub fn steps_on(
+        &mut self,
+        config: &TrainConfig,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        mut batches: impl FnMut(&mut rand_chacha::ChaCha8Rng) -> Result<(Tensor, Tensor)>,
+    ) -> Result<(f32, f32)> {
+        let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
+        for _ in 0..config.d_steps {
+            let (real, fake) = batches(rng)?;
+            let (c, p) = self.step(&real, &fake, config.gp_weight, rng)?;
+            critic_sum += c;
+            penalty_sum += p;
+        }
+        let steps = config.d_steps as f32;
+        Ok((critic_sum / steps, penalty_sum / steps))
+    }
 }
 
 impl Critic<2> {
@@ -102,15 +121,10 @@ impl Critic<2> {
         fake_batch: impl Fn(&[usize]) -> Result<Tensor>,
     ) -> Result<(f32, f32)> {
         let views = real.dim(0)?;
-        let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
-        for _ in 0..config.d_steps {
+        self.steps_on(config, rng, |rng| {
             let real = select(real, &pick_views(rng, views, batch_views))?;
             let fake = fake_batch(&pick_views(rng, views, batch_views))?;
-            let (c, p) = self.step(&real, &fake, config.gp_weight, rng)?;
-            critic_sum += c;
-            penalty_sum += p;
-        }
-        let steps = config.d_steps as f32;
-        Ok((critic_sum / steps, penalty_sum / steps))
+            Ok((real, fake))
+        })
     }
 }

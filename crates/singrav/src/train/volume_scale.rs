@@ -218,15 +218,11 @@ impl Stage for VolumeScale<'_> {
                 let real = fitted.features(colour)?;
                 let fake =
                     fitted.volume_features(&fake_volume, &self.config.activation(), colour)?;
-                let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
-                for _ in 0..self.config.d_steps {
-                    let (c, p) = critic.step(&real, &fake, self.config.gp_weight, rng)?;
-                    critic_sum += c;
-                    penalty_sum += p;
-                }
-                let steps = self.config.d_steps as f32;
-                losses.volume_critic = Some(critic_sum / steps);
-                losses.volume_penalty = Some(penalty_sum / steps);
+                // One real volume and this iteration's one fake at every step.
+                let (critic, penalty) =
+                    critic.steps_on(self.config, rng, |_| Ok((real.clone(), fake.clone())))?;
+                losses.volume_critic = Some(critic);
+                losses.volume_penalty = Some(penalty);
             }
             let (renderer, cameras) = (&self.renderer, &self.level.cameras);
             let channels = self.real.dim(1)?;
