@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use singrav::checkpoint::CHECKPOINT_FILE;
+use singrav::config::Concurrent;
 use singrav::dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
@@ -114,6 +115,24 @@ pub struct TrainOptions {
     /// The 3D critic also judges opacity-weighted colour per voxel, not only opacity.
     #[arg(long, requires = "lambda_volume_critic")]
     pub volume_critic_colour: bool,
+    /// Concurrent training (ConSinGAN): while a 3D scale trains, the generators of the K - 1
+    /// scales below it train too, on the same losses (default 1: the paper's training, coarser
+    /// scales frozen).
+    #[arg(long, value_name = "K")]
+    pub concurrent_scales: Option<usize>,
+    /// With --concurrent-scales: the learning rate of a generator k scales below the one
+    /// training is the scale's times F^k.
+    #[arg(long, value_name = "F", default_value_t = DEFAULT_CONCURRENT_RATE_SCALE, requires = "concurrent_scales")]
+    pub concurrent_learning_rate_scale: f64,
+    /// With --concurrent-scales: the coarsest scale that trains on above its own (2 keeps G_1,
+    /// where the scene's layout forms, frozen once trained).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 1,
+        requires = "concurrent_scales"
+    )]
+    pub concurrent_first_scale: usize,
     /// Set any field of the configuration (config.json's names) to a JSON value, after the
     /// preset and the flags above: `--set lambda_color=50 --set channels=32`. Repeatable.
     #[arg(long = "set", value_name = "FIELD=VALUE")]
@@ -126,6 +145,9 @@ pub struct TrainOptions {
 
 /// The fitted-volume weight `--fitted` and `--fit` use unless told otherwise.
 pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
+
+/// ConSinGAN's learning-rate factor per scale down (its `lr_scale`).
+pub const DEFAULT_CONCURRENT_RATE_SCALE: f64 = 0.1;
 
 impl TrainOptions {
     /// The configuration these options describe.
@@ -171,6 +193,13 @@ impl TrainOptions {
             config.lambda_volume_critic = weight;
         }
         config.volume_critic_colour |= self.volume_critic_colour;
+        if let Some(scales) = self.concurrent_scales {
+            config.concurrent = Some(Concurrent {
+                scales,
+                learning_rate_scale: self.concurrent_learning_rate_scale,
+                first_scale: self.concurrent_first_scale,
+            });
+        }
         config.holdout = self.holdout;
         for setting in &self.settings {
             let (field, value) = setting.split_once('=').with_context(|| {
@@ -436,6 +465,7 @@ fn format_losses(l: &StepLosses) -> String {
 #[cfg(test)]
 mod tests {
     use clap::Parser;
+    use singrav::config::Concurrent;
     use singrav::TrainConfig;
 
     use super::TrainOptions;
@@ -463,5 +493,47 @@ mod tests {
         let margin_only = config(&["--preset", "small", "--set", "sparse_shell=false"]);
         assert_eq!(margin_only.sparse_from_scale, Some(2));
         assert!(!margin_only.sparse_shell);
+    }
+
+    #[test]
+    fn concurrent_scales_set_consingans_training_and_bad_values_are_refused() {
+        assert_eq!(config(&["--preset", "tiny"]).concurrent, None);
+        let three = config(&["--preset", "tiny", "--concurrent-scales", "3"]);
+        assert_eq!(
+            three.concurrent,
+            Some(Concurrent {
+                scales: 3,
+                learning_rate_scale: 0.1,
+                first_scale: 1
+            })
+        );
+        let half = config(&[
+            "--concurrent-scales",
+            "3",
+            "--concurrent-learning-rate-scale",
+            "0.5",
+            "--concurrent-first-scale",
+            "2",
+        ]);
+        assert_eq!(
+            half.concurrent,
+            Some(Concurrent {
+                scales: 3,
+                learning_rate_scale: 0.5,
+                first_scale: 2
+            })
+        );
+        let parse = |args: &[&str]| {
+            Options::try_parse_from(std::iter::once("train").chain(args.iter().copied()))
+        };
+        // The factor or the first scale alone means nothing.
+        assert!(parse(&["--concurrent-learning-rate-scale", "0.5"]).is_err());
+        assert!(parse(&["--concurrent-first-scale", "2"]).is_err());
+        let zero = parse(&["--concurrent-scales", "0"])
+            .unwrap()
+            .options
+            .config();
+        let message = format!("{:#}", zero.unwrap_err());
+        assert!(message.contains("concurrent"), "{message}");
     }
 }

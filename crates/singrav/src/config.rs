@@ -66,6 +66,13 @@ pub struct TrainConfig {
     /// so that `--set lr_decay=...` finds it.
     #[serde(default)]
     pub lr_decay: Option<LrDecay>,
+    /// ConSinGAN's concurrent training (Hinz et al. 2021): while a 3D scale trains, the
+    /// generators of the scales just below it keep training too, on every loss of the scale, at
+    /// smaller learning rates (see [`Concurrent`]). `None` (every preset's default, and runs
+    /// made before it existed) is the paper's and SinGAN's training: coarser generators frozen.
+    /// Written as `null` rather than left out, so that `--set concurrent=...` finds it.
+    #[serde(default)]
+    pub concurrent: Option<Concurrent>,
     /// Adam betas (0.9, 0.999).
     pub betas: (f64, f64),
     /// WGAN-GP penalty weight (0.1).
@@ -197,6 +204,28 @@ pub struct LrDecay {
     pub at: f64,
     /// What the rate is multiplied by, in (0, 1].
     pub factor: f64,
+}
+
+/// Which coarser generators keep training while a 3D scale trains ([`TrainConfig::concurrent`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Concurrent {
+    /// 3D scales trained at once, the current one included (ConSinGAN's `train_depth`, 3);
+    /// 1 trains the current scale alone.
+    pub scales: usize,
+    /// The learning rate of the generator k scales below the current one is the scale's rate
+    /// times this to the power k (ConSinGAN's `lr_scale`, 0.1), in (0, 1].
+    pub learning_rate_scale: f64,
+    /// The coarsest scale whose generator keeps training above its own scale: 1 (ConSinGAN,
+    /// and when left out) lets every scale train on; 2 keeps G_1, where the scene's layout
+    /// forms, frozen once its scale is done.
+    #[serde(default = "first_concurrent_scale")]
+    pub first_scale: usize,
+}
+
+/// [`Concurrent::first_scale`] when a configuration leaves it out: every scale trains on.
+fn first_concurrent_scale() -> usize {
+    1
 }
 
 /// How many views one training step of a scale renders.
@@ -376,6 +405,7 @@ impl TrainConfig {
             scale_views: Some(table_views(&PAPER_VIEWS)),
             learning_rate: 5e-4,
             lr_decay: None,
+            concurrent: None,
             betas: (0.9, 0.999),
             gp_weight: 0.1,
             lambda_color: 10.0,
@@ -534,6 +564,41 @@ impl TrainConfig {
                 self.learning_rate * decay.factor
             }
             _ => self.learning_rate,
+        }
+    }
+
+    /// The coarser 3D scales whose generators train while 3D scale `n` (1-based) trains, coarsest
+    /// first, each with the factor its learning rate is the scale's times
+    /// ([`TrainConfig::concurrent`]); empty without concurrent training and for the upsampler.
+    ///
+    /// ```
+    /// use singrav::config::{Concurrent, TrainConfig};
+    /// let config = TrainConfig {
+    ///     concurrent: Some(Concurrent { scales: 3, learning_rate_scale: 0.1, first_scale: 1 }),
+    ///     ..TrainConfig::preset("tiny")?
+    /// };
+    /// assert_eq!(config.concurrent_scales(1), []);
+    /// assert_eq!(config.concurrent_scales(2), [(1, 0.1)]);
+    /// let scale_3 = config.concurrent_scales(3);
+    /// assert_eq!(scale_3.iter().map(|s| s.0).collect::<Vec<_>>(), [1, 2]);
+    /// assert!((scale_3[0].1 - 0.01).abs() < 1e-12);
+    /// // tiny's scale 4 is the 2D upsampler: it trains alone.
+    /// assert_eq!(config.concurrent_scales(4), []);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn concurrent_scales(&self, n: usize) -> Vec<(usize, f64)> {
+        match self.concurrent {
+            Some(Concurrent {
+                scales,
+                learning_rate_scale,
+                first_scale,
+            }) if n < self.scales() => {
+                let first = n.saturating_sub(scales.saturating_sub(1)).max(first_scale);
+                (first..n)
+                    .map(|m| (m, learning_rate_scale.powi((n - m) as i32)))
+                    .collect()
+            }
+            _ => Vec::new(),
         }
     }
 
@@ -777,6 +842,26 @@ impl TrainConfig {
                 ));
             }
         }
+        if let Some(Concurrent {
+            scales,
+            learning_rate_scale,
+            first_scale,
+        }) = self.concurrent
+        {
+            if scales == 0
+                || first_scale == 0
+                || !(learning_rate_scale > 0.0 && learning_rate_scale <= 1.0)
+            {
+                return Err(invalid(
+                    "concurrent",
+                    format!(
+                        "`scales` and `first_scale` must be at least 1 and `learning_rate_scale` \
+                         lie in (0, 1], got scales {scales}, first_scale {first_scale}, \
+                         learning_rate_scale {learning_rate_scale}"
+                    ),
+                ));
+            }
+        }
         let density_ok = self.density_scale.is_finite()
             && self.density_scale > 0.0
             && self.density_shift.is_finite();
@@ -817,7 +902,7 @@ impl FromStr for TrainConfig {
 
 #[cfg(test)]
 mod tests {
-    use super::{LrDecay, ScaleViews, TrainConfig};
+    use super::{Concurrent, LrDecay, ScaleViews, TrainConfig};
 
     #[test]
     fn runs_saved_before_opacity_supervision_read_as_trained_without_it() {
@@ -1006,6 +1091,52 @@ mod tests {
             };
             let message = bad.validate().unwrap_err().to_string();
             assert!(message.contains("lr_decay"), "{message}");
+        }
+    }
+
+    #[test]
+    fn concurrent_training_is_off_by_default_settable_and_checked() {
+        let tiny = TrainConfig::preset("tiny").unwrap();
+        assert_eq!(tiny.concurrent, None);
+        assert!((1..=tiny.scales()).all(|n| tiny.concurrent_scales(n).is_empty()));
+        // Runs made before the field existed have none.
+        let mut json = serde_json::to_value(&tiny).unwrap();
+        json.as_object_mut().unwrap().remove("concurrent");
+        assert_eq!(serde_json::from_value::<TrainConfig>(json).unwrap(), tiny);
+        let concurrent = tiny
+            .clone()
+            .with_setting("concurrent", r#"{"scales": 2, "learning_rate_scale": 0.5}"#)
+            .unwrap();
+        concurrent.validate().unwrap();
+        assert_eq!(concurrent.concurrent_scales(1), []);
+        assert_eq!(concurrent.concurrent_scales(2), [(1, 0.5)]);
+        assert_eq!(concurrent.concurrent_scales(3), [(2, 0.5)]);
+        let layout_frozen = tiny
+            .clone()
+            .with_setting(
+                "concurrent",
+                r#"{"scales": 3, "learning_rate_scale": 0.5, "first_scale": 2}"#,
+            )
+            .unwrap();
+        assert_eq!(layout_frozen.concurrent_scales(2), []);
+        assert_eq!(layout_frozen.concurrent_scales(3), [(2, 0.5)]);
+        for (scales, learning_rate_scale, first_scale) in [
+            (0, 0.1, 1),
+            (3, 0.0, 1),
+            (3, 1.5, 1),
+            (3, f64::NAN, 1),
+            (3, 0.1, 0),
+        ] {
+            let bad = TrainConfig {
+                concurrent: Some(Concurrent {
+                    scales,
+                    learning_rate_scale,
+                    first_scale,
+                }),
+                ..tiny.clone()
+            };
+            let message = bad.validate().unwrap_err().to_string();
+            assert!(message.contains("concurrent"), "{message}");
         }
     }
 }

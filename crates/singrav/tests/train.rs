@@ -7,6 +7,7 @@ use std::path::Path;
 use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::config::Concurrent;
 use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
 use singrav::scenes::StandingStones;
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
@@ -902,4 +903,104 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
         &RunOptions::default(),
     );
     assert!(err.contains("lambda_volume_critic"), "{err}");
+}
+
+/// Concurrent training (ConSinGAN): G_1 keeps training through scale 2 (on the active set's
+/// sparse path too), its optimiser is in mid-scale checkpoints, a killed run resumes to the
+/// uninterrupted weights, and one concurrent scale, or G_1 kept out of it, is the paper's
+/// training bit for bit.
+#[test]
+fn concurrent_training_trains_the_coarser_generator_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let plain = TrainConfig {
+        checkpoint_iterations: 2,
+        // G_2 on the active set, so G_1's gradient passes through the sparse generator.
+        sparse_from_scale: Some(2),
+        ..micro()
+    };
+    let config = TrainConfig {
+        concurrent: Some(Concurrent {
+            scales: 2,
+            learning_rate_scale: 0.5,
+            first_scale: 1,
+        }),
+        ..plain.clone()
+    };
+    let g1 = |tensors: &HashMap<String, Tensor>| -> Vec<(String, Vec<f32>)> {
+        let mut named: Vec<_> = tensors
+            .iter()
+            .filter(|(name, _)| name.starts_with("g1.") && !name.contains("running"))
+            .map(|(name, t)| (name.clone(), t.flatten_all().unwrap().to_vec1().unwrap()))
+            .collect();
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        named
+    };
+
+    // Stopped at the end of scale 1: G_1 as scale 1 left it, the same with and without.
+    let after_scale_1 = |config: &TrainConfig, dir: &Path| {
+        let mut stop = |p: &Progress| match p.event {
+            Event::ScaleDone(_) => Control::Stop,
+            _ => Control::Continue,
+        };
+        train(
+            config,
+            &data,
+            dir,
+            &RunOptions::default(),
+            &Device::Cpu,
+            &mut stop,
+        )
+        .unwrap();
+        g1(&checkpoint_tensors(dir))
+    };
+    let g1_plain = after_scale_1(&plain, &tmp.path().join("plain1"));
+    assert_eq!(g1_plain, after_scale_1(&config, &tmp.path().join("conc1")));
+
+    let whole = tmp.path().join("whole");
+    run_to_end(&config, &data, &whole);
+    let finished = checkpoint_tensors(&whole);
+    let g1_concurrent = g1(&finished);
+    // Every weight tensor of G_1 moved during scale 2 (the paper's run leaves it frozen); the
+    // biases of convolutions before a BatchNorm have no gradient (the batch mean cancels them).
+    for ((name, before), (_, after)) in g1_plain.iter().zip(&g1_concurrent) {
+        if !(name.starts_with("g1.blocks.") && name.ends_with(".conv.bias")) {
+            assert_ne!(before, after, "{name} did not train at scale 2");
+        }
+    }
+    let plain_whole = tmp.path().join("plain");
+    run_to_end(&plain, &data, &plain_whole);
+    assert_eq!(g1(&checkpoint_tensors(&plain_whole)), g1_plain);
+
+    // Killed in scale 2 after iteration 3: the checkpoint of iteration 2 holds G_1's optimiser.
+    let killed = tmp.path().join("killed");
+    let mut stop = stop_at(2, 3);
+    let options = RunOptions::default();
+    let outcome = train(&config, &data, &killed, &options, &Device::Cpu, &mut stop).unwrap();
+    assert!(matches!(outcome, TrainOutcome::Stopped));
+    assert!(checkpoint_tensors(&killed)
+        .keys()
+        .any(|name| name.starts_with("opt_g1.")));
+    run_with(&config, &data, &killed, &resume());
+    assert_same_tensors(&finished, &checkpoint_tensors(&killed));
+
+    // One scale at a time, or concurrent scales with G_1 kept frozen (micro's G_2 is its last
+    // 3D generator), is the paper's training.
+    let mut plain_tensors = checkpoint_tensors(&plain_whole);
+    plain_tensors.retain(|name, _| !name.starts_with("opt_"));
+    for (scales, first_scale) in [(1, 1), (2, 2)] {
+        let frozen = TrainConfig {
+            concurrent: Some(Concurrent {
+                scales,
+                learning_rate_scale: 0.5,
+                first_scale,
+            }),
+            ..plain.clone()
+        };
+        let dir = tmp.path().join(format!("frozen-{scales}-{first_scale}"));
+        run_to_end(&frozen, &data, &dir);
+        let mut tensors = checkpoint_tensors(&dir);
+        tensors.retain(|name, _| !name.starts_with("opt_"));
+        assert_same_tensors(&plain_tensors, &tensors);
+    }
 }

@@ -196,6 +196,7 @@ impl Stage for FinalScale<'_> {
             critic: &mut self.critic,
             volume_critic: None,
             generator_opt: &mut self.opt,
+            coarser_generators: &mut [],
         }
     }
 }

@@ -4,6 +4,7 @@
 //! after each scale.
 
 mod colour;
+mod concurrent;
 mod critic;
 mod final_scale;
 mod fitted;

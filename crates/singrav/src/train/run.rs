@@ -7,6 +7,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use radiance_volume::RadianceVolume;
 
+use super::concurrent::CoarserGenerator;
 use super::critic::{Critic, VolumeCritic};
 use super::final_scale::FinalScale;
 use super::fitted::load_fitted;
@@ -50,6 +51,8 @@ pub(super) struct StageParts<'a> {
     pub volume_critic: Option<&'a mut VolumeCritic>,
     /// The generator's optimiser (`opt_g.*`).
     pub generator_opt: &'a mut Adam,
+    /// The coarser generators training with it (`opt_g{scale}.*`; concurrent training).
+    pub coarser_generators: &'a mut [CoarserGenerator],
 }
 
 impl StageParts<'_> {
@@ -60,6 +63,9 @@ impl StageParts<'_> {
             critic.opt.set_learning_rate(rate);
         }
         self.generator_opt.set_learning_rate(rate);
+        for coarser in self.coarser_generators.iter_mut() {
+            coarser.opt.set_learning_rate(rate * coarser.rate_factor);
+        }
     }
 
     /// The critics' weights by checkpoint name (`d.*`, `d3.*`).
@@ -213,18 +219,17 @@ pub fn train(
         let mut stage: Box<dyn Stage + '_> = if n < config.scales() {
             let size = config.image_sizes[n - 1];
             let level = dataset.level(size, size, device)?;
-            // The frozen reconstruction V*_{n-1}: it sets the noise amplitude and the scale
-            // reconstructs on top of it.
-            let prev_reconstruction = if n >= 2 {
-                Some(
-                    model
-                        .generate(&model.reconstruction_noise(n - 1)?)?
-                        .detach(),
-                )
-            } else {
-                None
-            };
             if fresh {
+                // The reconstruction V*_{n-1} as the last scale left it sets the noise amplitude.
+                let prev_reconstruction = if n >= 2 {
+                    Some(
+                        model
+                            .generate(&model.reconstruction_noise(n - 1)?)?
+                            .detach(),
+                    )
+                } else {
+                    None
+                };
                 let amp = noise_amplitude(
                     &model,
                     n,
@@ -236,16 +241,8 @@ pub fn train(
                 state.noise_amps.push(amp);
             }
             Box::new(
-                VolumeScale::new(
-                    &model,
-                    n,
-                    level,
-                    state.depth_norm,
-                    prev_reconstruction,
-                    previous,
-                    &mut setup,
-                )?
-                .with_fitted(fitted.as_ref(), previous_volume, &mut setup)?,
+                VolumeScale::new(&model, n, level, state.depth_norm, previous, &mut setup)?
+                    .with_fitted(fitted.as_ref(), previous_volume, &mut setup)?,
             )
         } else {
             if fresh {
@@ -519,6 +516,10 @@ fn save(
         let (d_state, d_steps) = parts.critic.opt.state("opt_d.");
         tensors.extend(g_state);
         tensors.extend(d_state);
+        for coarser in parts.coarser_generators.iter() {
+            // It steps with the scale's generator, so `g_steps` counts its steps too.
+            tensors.extend(coarser.opt.state(&coarser.checkpoint_prefix()).0);
+        }
         if let Some(critic) = &parts.volume_critic {
             // It steps with the 2D critic, so `d_steps` counts its steps too.
             tensors.extend(critic.opt.state("opt_d3.").0);
@@ -571,6 +572,13 @@ fn restore_stage(
         .generator_opt
         .restore(tensors, "opt_g.", g_steps)
         .map_err(fail)?;
+    for coarser in parts.coarser_generators.iter_mut() {
+        let prefix = coarser.checkpoint_prefix();
+        coarser
+            .opt
+            .restore(tensors, &prefix, g_steps)
+            .map_err(fail)?;
+    }
     parts
         .critic
         .opt

@@ -9,6 +9,7 @@ use radiance_volume::RadianceVolume;
 use rand::Rng;
 
 use super::colour::colour_distribution_loss;
+use super::concurrent::CoarserGenerator;
 use super::critic::{Critic, VolumeCritic};
 use super::fitted::FittedTarget;
 use super::height_profile::height_profile_loss;
@@ -21,12 +22,13 @@ use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
 
-/// One iteration's random draw: this scale's noise and the frozen coarser volume it refines.
-/// As in SinGAN, noise is drawn once per iteration: the critic steps see the same fake (here
-/// from different views) and the generator steps refine the same draw.
+/// One iteration's random draw: the noise of the scales that train (this one, and with
+/// concurrent training the coarser ones that train with it) and the volume of the frozen scales
+/// below them. As in SinGAN, noise is drawn once per iteration: the critic steps see the same
+/// fake (here from different views) and the generator steps refine the same draw.
 struct Draw {
-    z: Tensor,
-    coarser: Option<Tensor>,
+    trained_noise: Vec<Tensor>,
+    frozen: Option<Tensor>,
 }
 
 /// The state of one 3D scale's training.
@@ -41,8 +43,11 @@ pub(super) struct VolumeScale<'a> {
     renderer: ViewRenderer,
     critic: Critic,
     opt: Adam,
-    /// The frozen reconstruction V*_{n-1} (raw), for n >= 2.
-    prev_reconstruction: Option<Tensor>,
+    /// The coarser generators that train with this one (concurrent training), coarsest first.
+    coarser: Vec<CoarserGenerator>,
+    /// The reconstruction (raw) of the last frozen scale, below every generator that trains;
+    /// `None` when scale 1 trains.
+    frozen_reconstruction: Option<Tensor>,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
     /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
@@ -76,14 +81,14 @@ fn masked_mse(a: &Tensor, b: &Tensor, mask: &Tensor) -> Result<Tensor> {
 }
 
 impl<'a> VolumeScale<'a> {
-    /// Sets up scale `n` (its generator already pushed onto `model`) on top of the frozen
-    /// reconstruction `V*_{n-1}` (`None` at n = 1).
+    /// Sets up scale `n` (its generator already pushed onto `model`), and with concurrent
+    /// training the coarser generators that train with it, on top of the frozen scales' fixed
+    /// reconstruction.
     pub fn new(
         model: &'a SinGrav,
         n: usize,
         level: DatasetLevel,
         depth_norm: f32,
-        prev_reconstruction: Option<Tensor>,
         previous_critic: Option<&HashMap<String, Tensor>>,
         rng: &mut impl Rng,
     ) -> Result<Self> {
@@ -98,6 +103,17 @@ impl<'a> VolumeScale<'a> {
             .generator_vars(n)
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
         let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let coarser = CoarserGenerator::for_scale(model, config, n)?;
+        let frozen_scales = n - 1 - coarser.len();
+        let frozen_reconstruction = if frozen_scales == 0 {
+            None
+        } else {
+            Some(
+                model
+                    .generate(&model.reconstruction_noise(frozen_scales)?)?
+                    .detach(),
+            )
+        };
         Ok(Self {
             model,
             config,
@@ -107,7 +123,8 @@ impl<'a> VolumeScale<'a> {
             renderer,
             critic,
             opt,
-            prev_reconstruction,
+            coarser,
+            frozen_reconstruction,
             fitted: None,
             volume_critic: None,
         })
@@ -151,42 +168,51 @@ impl<'a> VolumeScale<'a> {
         Ok(self)
     }
 
-    /// Draws fresh noise at every scale and runs the frozen coarser scales on it.
+    /// The first scale whose generator trains.
+    fn first_trained(&self) -> usize {
+        self.n - self.coarser.len()
+    }
+
+    /// Draws fresh noise at every scale and runs the frozen scales on it.
     fn draw(&self, rng: &mut impl Rng) -> Result<Draw> {
         let mut noise = self.model.draw_noise(self.n, rng)?;
-        let z = noise
-            .pop()
-            .ok_or_else(|| crate::error::invalid("scale", "no 3D scale to generate"))?;
-        let coarser = if noise.is_empty() {
+        let trained_noise = noise.split_off(self.first_trained() - 1);
+        let frozen = if noise.is_empty() {
             None
         } else {
             Some(self.model.generate(&noise)?.detach())
         };
-        Ok(Draw { z, coarser })
+        Ok(Draw {
+            trained_noise,
+            frozen,
+        })
     }
 
-    /// The random volume of this scale for a draw, differentiable in G_n.
+    /// The generators of the last `noise.len()` scales up to this one, run on `noise` on top
+    /// of the volume `frozen` of the scales below them: differentiable in those generators.
+    fn run_trained(&self, frozen: Option<&Tensor>, noise: &[Tensor]) -> Result<Tensor> {
+        let mut volume = frozen.cloned();
+        for (scale, z) in (self.n + 1 - noise.len()..).zip(noise) {
+            volume = Some(match volume {
+                None => self.model.coarsest(z)?,
+                Some(prev) => self.model.refine(scale, z, &prev)?,
+            });
+        }
+        volume.ok_or_else(|| crate::error::invalid("scale", "no 3D scale to generate"))
+    }
+
+    /// The random volume of this scale for a draw, differentiable in the generators that train.
     fn fake_volume(&self, draw: &Draw) -> Result<Tensor> {
-        match &draw.coarser {
-            None => self.model.coarsest(&draw.z),
-            Some(prev) => self.model.refine(self.n, &draw.z, prev),
-        }
+        self.run_trained(draw.frozen.as_ref(), &draw.trained_noise)
     }
 
-    /// The reconstruction V*_n from {z*_1, 0, ...}, differentiable in G_n only.
+    /// The reconstruction V*_n from {z*_1, 0, ...}, differentiable in the generators that train.
     fn reconstruction(&self) -> Result<Tensor> {
-        match &self.prev_reconstruction {
-            None => self.model.coarsest(self.model.z_star()),
-            Some(prev) => {
-                let size = self.config.volume_sizes[self.n - 1];
-                let zero = Tensor::zeros(
-                    (1, VOLUME_CHANNELS, size, size, size),
-                    candle_core::DType::F32,
-                    self.model.device(),
-                )?;
-                self.model.refine(self.n, &zero, prev)
-            }
-        }
+        let noise = self
+            .model
+            .reconstruction_noise(self.n)?
+            .split_off(self.first_trained() - 1);
+        self.run_trained(self.frozen_reconstruction.as_ref(), &noise)
     }
 
     fn views(&self) -> usize {
@@ -312,7 +338,11 @@ impl Stage for VolumeScale<'_> {
                 depth_sum += depth.to_scalar::<f32>()?;
                 total = (total + depth)?;
             }
-            self.opt.step(&total.backward()?)?;
+            let grads = total.backward()?;
+            self.opt.step(&grads)?;
+            for coarser in &mut self.coarser {
+                coarser.opt.step(&grads)?;
+            }
         }
         let steps = self.config.g_steps as f32;
         losses.color = color_sum / steps;
@@ -355,6 +385,7 @@ impl Stage for VolumeScale<'_> {
             critic: &mut self.critic,
             volume_critic: self.volume_critic.as_mut(),
             generator_opt: &mut self.opt,
+            coarser_generators: &mut self.coarser,
         }
     }
 }
