@@ -48,6 +48,8 @@ pub(super) struct VolumeScale<'a> {
     /// The reconstruction (raw) of the last frozen scale, below every generator that trains;
     /// `None` when scale 1 trains.
     frozen_reconstruction: Option<Tensor>,
+    /// The fixed reconstruction noise of the scales that train ({z*_1} or zeros).
+    reconstruction_noise: Vec<Tensor>,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
     /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
@@ -104,15 +106,12 @@ impl<'a> VolumeScale<'a> {
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
         let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
         let coarser = CoarserGenerator::for_scale(model, config, n)?;
-        let frozen_scales = n - 1 - coarser.len();
-        let frozen_reconstruction = if frozen_scales == 0 {
+        let mut frozen_noise = model.reconstruction_noise(n)?;
+        let reconstruction_noise = frozen_noise.split_off(n - 1 - coarser.len());
+        let frozen_reconstruction = if frozen_noise.is_empty() {
             None
         } else {
-            Some(
-                model
-                    .generate(&model.reconstruction_noise(frozen_scales)?)?
-                    .detach(),
-            )
+            Some(model.generate(&frozen_noise)?.detach())
         };
         Ok(Self {
             model,
@@ -125,6 +124,7 @@ impl<'a> VolumeScale<'a> {
             opt,
             coarser,
             frozen_reconstruction,
+            reconstruction_noise,
             fitted: None,
             volume_critic: None,
         })
@@ -208,11 +208,10 @@ impl<'a> VolumeScale<'a> {
 
     /// The reconstruction V*_n from {z*_1, 0, ...}, differentiable in the generators that train.
     fn reconstruction(&self) -> Result<Tensor> {
-        let noise = self
-            .model
-            .reconstruction_noise(self.n)?
-            .split_off(self.first_trained() - 1);
-        self.run_trained(self.frozen_reconstruction.as_ref(), &noise)
+        self.run_trained(
+            self.frozen_reconstruction.as_ref(),
+            &self.reconstruction_noise,
+        )
     }
 
     fn views(&self) -> usize {
