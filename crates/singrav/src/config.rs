@@ -55,8 +55,9 @@ pub struct TrainConfig {
     /// Views per step of each scale (coarsest first, the upsampler last) when they are not all
     /// `views_per_step`, as in the paper's table of training parameters (6 generated and 2
     /// reconstruction views at the coarse scales down to 2 and 1 at the finest). Absent
-    /// (`None`) in runs made before it existed, which used `views_per_step` everywhere.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// (`None`) in runs made before it existed, which used `views_per_step` everywhere. Written
+    /// as `null` rather than left out, so that `--set scale_views=...` finds it.
+    #[serde(default)]
     pub scale_views: Option<Vec<ScaleViews>>,
     /// Adam learning rate (5e-4) for generators and critics.
     pub learning_rate: f64,
@@ -176,8 +177,9 @@ pub struct TrainConfig {
     pub holdout: Option<usize>,
     /// Where the scene is in the dataset's coordinates, when not in `[-1, 1]^3`: training maps
     /// the box into the model's cube, and generated volumes are placed back on
-    /// [`SceneBounds::cube`]. Absent from runs made before it existed (the unit cube).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// [`SceneBounds::cube`]. Absent from runs made before it existed (the unit cube). Written
+    /// as `null` rather than left out, so that `--set bounds=...` finds it.
+    #[serde(default)]
     pub bounds: Option<SceneBounds>,
 }
 
@@ -281,6 +283,11 @@ fn uniform_schedule(iterations: usize, scales: usize) -> Vec<ScaleSchedule> {
 /// three seeds, samples' metrics equal or better; docs/training.md has the tables and times).
 const TINY_ITERATIONS: [usize; 4] = [240, 160, 240, 80];
 
+/// Iterations per scale of the `small` preset: `tiny`'s coarse scales, then fewer where an
+/// iteration costs most (3.6 s at 57^3, 5.9 s for the upsampler at 216^2 on 2 cores), so the
+/// preset trains in under 20 minutes (docs/training.md, "`small` in 20 minutes").
+const SMALL_ITERATIONS: [usize; 5] = [240, 160, 160, 80, 40];
+
 /// The paper's table of training parameters (`tab:train_params`), first row (Stonehenge and
 /// most scenes): views per step of generated scenes and of the reconstruction at its 6 scales.
 const PAPER_VIEWS: [(usize, usize); 6] = [(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)];
@@ -298,19 +305,19 @@ fn table_views(table: &[(usize, usize)]) -> Vec<ScaleViews> {
         .collect()
 }
 
-/// Views of the reconstruction loss per generator step at `tiny`'s 3D scales (its critics see
+/// Views of the reconstruction loss per generator step at the CPU presets' 3D scales (its critics see
 /// 2): cheap next to the generator pass, and V*'s gradient less noisy.
-const TINY_RECONSTRUCTION_VIEWS: usize = 8;
+const CPU_RECONSTRUCTION_VIEWS: usize = 8;
 
-/// `tiny`'s reconstruction weights (colour, depth, opacity) are the other presets' times this:
+/// The CPU presets' reconstruction weights (colour, depth, opacity) are the paper's times this:
 /// against the adversarial and colour-distribution terms, the reconstruction V* gained 2.2 dB
 /// PSNR over three seeds (docs/training.md, "Why V* stays below a direct fit").
-const TINY_RECONSTRUCTION_WEIGHT: f64 = 5.0;
+const CPU_RECONSTRUCTION_WEIGHT: f64 = 5.0;
 
-/// Weight of `tiny`'s height-profile loss of samples (see
+/// Weight of the CPU presets' height-profile loss of samples (see
 /// [`TrainConfig::lambda_height_profile`]); it took the matter in the sky that the heavier
 /// reconstruction weights let in back out (docs/training.md).
-const TINY_HEIGHT_PROFILE: f64 = 50.0;
+const CPU_HEIGHT_PROFILE: f64 = 50.0;
 
 /// Weight of the colour-distribution loss in every preset (see [`TrainConfig::lambda_colour`]).
 const LAMBDA_COLOUR: f64 = 20.0;
@@ -348,6 +355,29 @@ fn check_weight(field: &str, value: f64) -> Result<()> {
     }
 }
 
+/// The training recipe measured on `tiny` (docs/training.md), for a CPU preset with the sizes
+/// of `sized` and `iterations` per scale (a quarter of them reconstruction-only): learning rate
+/// 1e-3 (far fewer iterations than the paper, so larger steps), reconstruction weights
+/// [`CPU_RECONSTRUCTION_WEIGHT`] times the paper's with [`CPU_RECONSTRUCTION_VIEWS`] views per
+/// generator step, 2 views for the critics, and the samples' height profile.
+fn cpu_recipe(sized: TrainConfig, iterations: &[usize]) -> TrainConfig {
+    TrainConfig {
+        schedule: iterations
+            .iter()
+            .map(|&n| ScaleSchedule::quarter_reconstruction(n))
+            .collect(),
+        views_per_step: 2,
+        learning_rate: 1e-3,
+        checkpoint_seconds: 60,
+        lambda_color: sized.lambda_color * CPU_RECONSTRUCTION_WEIGHT,
+        lambda_depth: sized.lambda_depth * CPU_RECONSTRUCTION_WEIGHT,
+        lambda_opacity: sized.lambda_opacity * CPU_RECONSTRUCTION_WEIGHT,
+        lambda_height_profile: CPU_HEIGHT_PROFILE,
+        ..sized
+    }
+    .with_reconstruction_views(CPU_RECONSTRUCTION_VIEWS)
+}
+
 /// `count` sizes starting at `first`, each `growth` times the previous, rounded.
 fn geometric(first: usize, growth: f64, count: usize) -> Vec<usize> {
     (0..count)
@@ -380,11 +410,13 @@ impl TrainConfig {
     ///   samples. Needs a GPU (see docs/training.md).
     /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
     ///   generated views.
-    /// - `small`: N = 5, volumes 24..57, renderings 32..108, 16 channels; an hour-scale CPU run.
+    /// - `small`: N = 5, volumes 24..57, renderings 32..108 (final 216^2), 16 channels,
+    ///   `tiny`'s training recipe with fewer iterations at the costly fine scales; under 20
+    ///   minutes on 2 CPU cores.
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
     ///   5x the paper's and the samples' height profile (both measured in docs/training.md);
-    ///   about ten minutes on 2 CPU cores.
+    ///   about seven minutes on 2 CPU cores.
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds); dense finer scale.
     ///
     /// Every preset but `micro` runs its finer 3D scales on the active set, shell included
@@ -458,25 +490,8 @@ impl TrainConfig {
                 ..paper
             }),
             "paper" => Ok(paper),
-            "small" => Ok(Self {
-                schedule: uniform_schedule(600, 5),
-                checkpoint_seconds: 180,
-                ..scaled("small", 5, 24, 32)
-            }),
-            "tiny" => Ok(Self {
-                schedule: TINY_ITERATIONS
-                    .map(ScaleSchedule::quarter_reconstruction)
-                    .to_vec(),
-                views_per_step: 2,
-                learning_rate: 1e-3,
-                checkpoint_seconds: 60,
-                lambda_color: paper.lambda_color * TINY_RECONSTRUCTION_WEIGHT,
-                lambda_depth: paper.lambda_depth * TINY_RECONSTRUCTION_WEIGHT,
-                lambda_opacity: paper.lambda_opacity * TINY_RECONSTRUCTION_WEIGHT,
-                lambda_height_profile: TINY_HEIGHT_PROFILE,
-                ..scaled("tiny", 4, 16, 24)
-            }
-            .with_reconstruction_views(TINY_RECONSTRUCTION_VIEWS)),
+            "small" => Ok(cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS)),
+            "tiny" => Ok(cpu_recipe(scaled("tiny", 4, 16, 24), &TINY_ITERATIONS)),
             "micro" => Ok(Self {
                 layers: 3,
                 channels: 4,
@@ -1138,5 +1153,79 @@ mod tests {
             let message = bad.validate().unwrap_err().to_string();
             assert!(message.contains("concurrent"), "{message}");
         }
+    }
+
+    #[test]
+    fn per_scale_views_and_bounds_are_settable_on_presets_without_them() {
+        // `micro` has neither, so the fields must be listed for `--set` to find them.
+        let micro = TrainConfig::preset("micro").unwrap();
+        assert_eq!((micro.scale_views.clone(), micro.bounds), (None, None));
+        let views = r#"[{"generated": 2, "reconstruction": 8}, {"generated": 2, "reconstruction": 8},
+            {"generated": 1, "reconstruction": 2}]"#;
+        let set = micro
+            .clone()
+            .with_setting("scale_views", views)
+            .unwrap()
+            .with_setting("bounds", r#"{"min": [-2, -2, 0], "max": [2, 2, 1]}"#)
+            .unwrap();
+        set.validate().unwrap();
+        assert_eq!(
+            set.views(1),
+            ScaleViews {
+                generated: 2,
+                reconstruction: 8
+            }
+        );
+        assert_eq!(
+            set.views(3),
+            ScaleViews {
+                generated: 1,
+                reconstruction: 2
+            }
+        );
+        assert_eq!(set.bounds.unwrap().max, [2.0, 2.0, 1.0]);
+        // Runs written before the fields were listed as `null` read as before.
+        let mut json = serde_json::to_value(&micro).unwrap();
+        let fields = json.as_object_mut().unwrap();
+        assert_eq!(fields.remove("scale_views"), Some(serde_json::Value::Null));
+        assert_eq!(fields.remove("bounds"), Some(serde_json::Value::Null));
+        assert_eq!(serde_json::from_value::<TrainConfig>(json).unwrap(), micro);
+    }
+
+    #[test]
+    fn small_is_tinys_recipe_at_its_own_sizes() {
+        let (tiny, small) = (
+            TrainConfig::preset("tiny").unwrap(),
+            TrainConfig::preset("small").unwrap(),
+        );
+        small.validate().unwrap();
+        assert_eq!(small.volume_sizes, [24, 32, 43, 57]);
+        assert_eq!(small.image_sizes, [32, 48, 72, 108]);
+        assert_eq!(small.final_image_size(), 216);
+        let iterations: Vec<_> = small.schedule.iter().map(|s| s.iterations).collect();
+        assert_eq!(iterations, [240, 160, 160, 80, 40]);
+        assert!(small
+            .schedule
+            .iter()
+            .all(|s| s.reconstruction_only * 4 == s.iterations));
+        // Everything but the sizes and the schedule is tiny's.
+        let resized = TrainConfig {
+            preset: tiny.preset.clone(),
+            volume_sizes: tiny.volume_sizes.clone(),
+            image_sizes: tiny.image_sizes.clone(),
+            samples: tiny.samples.clone(),
+            schedule: tiny.schedule.clone(),
+            scale_views: tiny.scale_views.clone(),
+            ..small.clone()
+        };
+        assert_eq!(resized, tiny);
+        assert!((1..small.scales()).all(|n| small.views(n).reconstruction == 8));
+        assert_eq!(
+            small.views(5),
+            ScaleViews {
+                generated: 2,
+                reconstruction: 2
+            }
+        );
     }
 }
