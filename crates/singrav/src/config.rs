@@ -305,8 +305,8 @@ fn table_views(table: &[(usize, usize)]) -> Vec<ScaleViews> {
         .collect()
 }
 
-/// Views of the reconstruction loss per generator step at the CPU presets' 3D scales (its critics see
-/// 2): cheap next to the generator pass, and V*'s gradient less noisy.
+/// Views of the reconstruction loss per generator step at the CPU presets' 3D scales (their
+/// critics see 2): cheap next to the generator pass, and V*'s gradient less noisy.
 const CPU_RECONSTRUCTION_VIEWS: usize = 8;
 
 /// The CPU presets' reconstruction weights (colour, depth, opacity) are the paper's times this:
