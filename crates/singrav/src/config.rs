@@ -919,6 +919,12 @@ impl FromStr for TrainConfig {
 mod tests {
     use super::{Concurrent, LrDecay, ScaleViews, TrainConfig};
 
+    /// Asserts that `config` fails validation with an error naming `field`.
+    fn assert_refused_naming(config: &TrainConfig, field: &str) {
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains(field), "{message}");
+    }
+
     #[test]
     fn runs_saved_before_opacity_supervision_read_as_trained_without_it() {
         let mut json = serde_json::to_value(TrainConfig::preset("tiny").unwrap()).unwrap();
@@ -981,8 +987,7 @@ mod tests {
         let mut blind = micro.clone();
         blind.critic_opacity = false;
         blind.lambda_height_profile = 1.0;
-        let err = blind.validate().unwrap_err().to_string();
-        assert!(err.contains("critic_opacity"), "{err}");
+        assert_refused_naming(&blind, "critic_opacity");
     }
 
     #[test]
@@ -1070,8 +1075,7 @@ mod tests {
         };
         let zero = micro.with_reconstruction_views(0);
         for config in [short, zero] {
-            let message = config.validate().unwrap_err().to_string();
-            assert!(message.contains("scale_views"), "{message}");
+            assert_refused_naming(&config, "scale_views");
         }
     }
 
@@ -1104,8 +1108,7 @@ mod tests {
                 lr_decay: Some(LrDecay { at, factor }),
                 ..decayed.clone()
             };
-            let message = bad.validate().unwrap_err().to_string();
-            assert!(message.contains("lr_decay"), "{message}");
+            assert_refused_naming(&bad, "lr_decay");
         }
     }
 
@@ -1150,8 +1153,7 @@ mod tests {
                 }),
                 ..tiny.clone()
             };
-            let message = bad.validate().unwrap_err().to_string();
-            assert!(message.contains("concurrent"), "{message}");
+            assert_refused_naming(&bad, "concurrent");
         }
     }
 
