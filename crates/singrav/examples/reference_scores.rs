@@ -97,11 +97,18 @@ fn main() -> Result<()> {
     };
     let colour_cameras = real.level(COLOUR_SIZE, COLOUR_SIZE, &device)?.cameras;
     let opacity_cameras = real.level(OPACITY_SIZE, OPACITY_SIZE, &device)?.cameras;
+    // As many uniform samples per voxel as `tiny`'s finest 3D scale takes.
+    let tiny = TrainConfig::preset("tiny")?;
+    let per_voxel = match (tiny.samples.last(), tiny.volume_sizes.last()) {
+        (Some(&samples), Some(&size)) => samples as f64 / size as f64,
+        _ => return Err("the tiny preset has no 3D scale".into()),
+    };
+    let samples = (per_voxel * grid as f64).round() as usize;
     let (mut colour, mut opacity) = (Vec::new(), Vec::new());
     for layout in 0..=scenes {
-        let volume = fitted(&dir, layout, grid, &whole(layout)?)?;
-        colour.push(render_all(&volume, &colour_cameras, grid, false)?);
-        opacity.push(render_all(&volume, &opacity_cameras, grid, true)?);
+        let volume = fitted(&dir, layout, grid, || whole(layout))?;
+        colour.push(render_all(&volume, &colour_cameras, samples, false)?);
+        opacity.push(render_all(&volume, &opacity_cameras, samples, true)?);
     }
     row(
         &format!("layout 0 fitted at {grid}^3"),
@@ -116,49 +123,42 @@ fn main() -> Result<()> {
     Ok(())
 }
 
-/// Layout `layout` fitted directly at `grid^3` to all of its views, read from DIR when a
-/// previous run fitted it.
+/// Layout `layout` fitted directly at `grid^3` to all of its views (loaded by `data` only when
+/// needed), read from DIR when a previous run fitted it.
 fn fitted(
     dir: &std::path::Path,
     layout: u64,
     grid: usize,
-    data: &Dataset,
+    data: impl FnOnce() -> Result<Dataset>,
 ) -> Result<RadianceVolume> {
     let path = dir.join(format!("fit-{layout}-{grid}.safetensors"));
     if path.exists() {
         return Ok(RadianceVolume::load_safetensors(&path)?);
     }
+    let data = data()?;
     let config = FitConfig {
         size: grid,
         start_size: FitConfig::default().start_size.min(grid),
         ..FitConfig::default()
     };
     let all: Vec<usize> = (0..data.len()).collect();
-    let fit = fit_volume(data, &all, &config, &mut |_| {})?;
+    let fit = fit_volume(&data, &all, &config, &mut |_| {})?;
     eprintln!("layout {layout} fitted at {grid}^3 in {:.1} s", fit.seconds);
     fit.volume.save_safetensors(&path)?;
     Ok(fit.volume)
 }
 
-/// `volume` rendered from every camera as `volgen eval` renders a generated `grid^3` volume
-/// (uniform samples, as many per voxel as `tiny`'s finest 3D scale takes; white background):
-/// colour `(V, 3, h, w)`, or with `opacity` the opacity `(V, 1, h, w)`.
+/// `volume` rendered from every camera as `volgen eval` renders a generated volume (`samples`
+/// uniform samples per ray, white background; `singrav::fit::render_views` samples per voxel
+/// and gives no opacity): colour `(V, 3, h, w)`, or with `opacity` the opacity `(V, 1, h, w)`.
 fn render_all(
     volume: &RadianceVolume,
     cameras: &[Camera],
-    grid: usize,
+    samples: usize,
     opacity: bool,
 ) -> Result<Tensor> {
-    let tiny = TrainConfig::preset("tiny")?;
-    let (tiny_samples, tiny_grid) = (tiny.samples.last(), tiny.volume_sizes.last());
-    let per_voxel = match (tiny_samples, tiny_grid) {
-        (Some(&samples), Some(&size)) => samples as f64 / size as f64,
-        _ => return Err("the tiny preset has no 3D scale".into()),
-    };
     let config = RenderConfig::default()
-        .with_sampler(Sampler::Uniform {
-            samples: (per_voxel * grid as f64).round() as usize,
-        })
+        .with_sampler(Sampler::Uniform { samples })
         .with_background([1.0, 1.0, 1.0])
         .with_opacity(opacity);
     let mut views = Vec::with_capacity(cameras.len());
