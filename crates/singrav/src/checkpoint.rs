@@ -54,7 +54,8 @@ pub struct Checkpoint {
     pub config: TrainConfig,
     /// Where it stands.
     pub state: TrainState,
-    /// Weights (`g{n}.*`, `up.*`, `d.*`), `z_star` and optimiser moments (`opt_g.*`, `opt_d.*`).
+    /// Weights (`g{n}.*`, `up.*`, `d.*`), `z_star` (and the optimised `z_star.{n}` of runs with
+    /// `reconstruction_noise_lr > 0`) and optimiser moments (`opt_g.*`, `opt_d.*`, `opt_z.*`).
     pub tensors: HashMap<String, Tensor>,
 }
 

@@ -31,6 +31,9 @@ pub struct SinGrav {
     upsampler: Option<(Upsampler2d, VarMap)>,
     noise_amps: Vec<f64>,
     z_star: Tensor,
+    /// The reconstruction noise z*_n of the 3D scales n >= 2 built so far (index n - 2), when
+    /// the configuration optimises it (`reconstruction_noise_lr > 0`); zeros otherwise.
+    fine_z_star: Vec<Var>,
     csg: Option<Tensor>,
 }
 
@@ -153,6 +156,7 @@ impl SinGrav {
             upsampler: None,
             noise_amps: Vec::new(),
             z_star,
+            fine_z_star: Vec::new(),
             csg,
         })
     }
@@ -216,6 +220,14 @@ impl SinGrav {
             copy_matching(&var_tensors(previous), &map)?;
             zero_residual(&map)?;
         }
+        if n >= 2 && self.config.reconstruction_noise_lr > 0.0 {
+            let size = self.config.volume_sizes[n - 1];
+            self.fine_z_star.push(Var::zeros(
+                (1, VOLUME_CHANNELS, size, size, size),
+                DType::F32,
+                &self.device,
+            )?);
+        }
         self.generators.push((generator, map.clone()));
         self.noise_amps.push(amp);
         Ok(map)
@@ -269,16 +281,25 @@ impl SinGrav {
             .collect()
     }
 
-    /// The reconstruction noise {z*_1, 0, ..., 0} for 3D scales `1..=scales`.
+    /// The optimised reconstruction noise z*_n of 3D scale `n` >= 2, when the configuration
+    /// optimises it and the scale is built.
+    pub fn reconstruction_noise_var(&self, n: usize) -> Option<&Var> {
+        self.fine_z_star.get(n.checked_sub(2)?)
+    }
+
+    /// The reconstruction noise for 3D scales `1..=scales`: {z*_1, 0, ..., 0} as in SinGAN, or
+    /// with `reconstruction_noise_lr > 0` the optimised z*_n at the scales n >= 2.
     pub fn reconstruction_noise(&self, scales: usize) -> Result<Vec<Tensor>> {
         let mut noise = vec![self.z_star.clone()];
         for n in 2..=scales {
-            let s = self.config.volume_sizes[n - 1];
-            noise.push(Tensor::zeros(
-                (1, VOLUME_CHANNELS, s, s, s),
-                DType::F32,
-                &self.device,
-            )?);
+            let z = match self.reconstruction_noise_var(n) {
+                Some(var) => var.as_tensor().clone(),
+                None => {
+                    let s = self.config.volume_sizes[n - 1];
+                    Tensor::zeros((1, VOLUME_CHANNELS, s, s, s), DType::F32, &self.device)?
+                }
+            };
+            noise.push(z);
         }
         Ok(noise)
     }
@@ -373,6 +394,9 @@ impl SinGrav {
             }
         }
         out.insert("z_star".into(), self.z_star.clone());
+        for (i, z) in self.fine_z_star.iter().enumerate() {
+            out.insert(format!("z_star.{}", i + 2), z.as_tensor().clone());
+        }
         out
     }
 
@@ -397,8 +421,15 @@ impl SinGrav {
             let map = model
                 .push_generator(amp, &mut rng)
                 .map_err(|e| e.to_string())?;
-            let prefix = format!("g{}.", model.generators.len());
-            load_into(&map, tensors, &prefix, device)?;
+            let n = model.generators.len();
+            load_into(&map, tensors, &format!("g{n}."), device)?;
+            if let Some(var) = model.reconstruction_noise_var(n) {
+                let key = format!("z_star.{n}");
+                let saved = tensors
+                    .get(&key)
+                    .ok_or_else(|| format!("tensor `{key}` is missing"))?;
+                set_checked(var, saved, &key, device)?;
+            }
         }
         if upsampler {
             let map = model.push_upsampler(&mut rng).map_err(|e| e.to_string())?;
@@ -420,15 +451,25 @@ pub(crate) fn load_into(
         let saved = tensors
             .get(&key)
             .ok_or_else(|| format!("tensor `{key}` is missing"))?;
-        if saved.shape() != var.as_tensor().shape() {
-            return Err(format!(
-                "tensor `{key}` has shape {:?}, the model expects {:?}",
-                saved.shape(),
-                var.as_tensor().shape()
-            ));
-        }
-        let saved = saved.to_device(device).map_err(|e| e.to_string())?;
-        var.set(&saved).map_err(|e| e.to_string())?;
+        set_checked(&var, saved, &key, device)?;
     }
     Ok(())
+}
+
+/// Sets `var` to the saved tensor `key`, which must have its shape.
+fn set_checked(
+    var: &Var,
+    saved: &Tensor,
+    key: &str,
+    device: &Device,
+) -> std::result::Result<(), String> {
+    if saved.shape() != var.as_tensor().shape() {
+        return Err(format!(
+            "tensor `{key}` has shape {:?}, the model expects {:?}",
+            saved.shape(),
+            var.as_tensor().shape()
+        ));
+    }
+    let saved = saved.to_device(device).map_err(|e| e.to_string())?;
+    var.set(&saved).map_err(|e| e.to_string())
 }

@@ -172,8 +172,8 @@ impl SinGrav {
     }
 
     /// The fixed-noise reconstruction V*: the raw volume `(1, 4, s, s, s)` of the finest 3D
-    /// scale built from the reconstruction noise {z*_1, 0, ..., 0} (detached), the volume
-    /// training fits to the dataset's views.
+    /// scale built from the reconstruction noise ({z*_1, 0, ..., 0}, or with optimised finer
+    /// noise {z*_1, z*_2, ...}; detached), the volume training fits to the dataset's views.
     ///
     /// ```no_run
     /// # let device = candle_core::Device::Cpu;

@@ -197,6 +197,7 @@ impl Stage for FinalScale<'_> {
             volume_critic: None,
             generator_opt: &mut self.opt,
             coarser_generators: &mut [],
+            reconstruction_noise_opt: None,
         }
     }
 }

@@ -53,11 +53,15 @@ pub(super) struct StageParts<'a> {
     pub generator_opt: &'a mut Adam,
     /// The coarser generators training with it (`opt_g{scale}.*`; concurrent training).
     pub coarser_generators: &'a mut [CoarserGenerator],
+    /// The optimiser of the scale's reconstruction noise z*_n (`opt_z.*`), when the run
+    /// optimises it.
+    pub reconstruction_noise_opt: Option<&'a mut Adam>,
 }
 
 impl StageParts<'_> {
-    /// Sets every optimiser's learning rate.
-    fn set_learning_rate(&mut self, rate: f64) {
+    /// Sets every optimiser's learning rate: `rate` for the networks, `noise_rate` for the
+    /// reconstruction noise.
+    fn set_learning_rate(&mut self, rate: f64, noise_rate: f64) {
         self.critic.opt.set_learning_rate(rate);
         if let Some(critic) = self.volume_critic.as_mut() {
             critic.opt.set_learning_rate(rate);
@@ -65,6 +69,9 @@ impl StageParts<'_> {
         self.generator_opt.set_learning_rate(rate);
         for coarser in self.coarser_generators.iter_mut() {
             coarser.opt.set_learning_rate(rate * coarser.rate_factor);
+        }
+        if let Some(opt) = self.reconstruction_noise_opt.as_mut() {
+            opt.set_learning_rate(noise_rate);
         }
     }
 
@@ -89,6 +96,8 @@ impl StageParts<'_> {
 /// Checkpoint names of the 2D and 3D critics' weights.
 const CRITIC_PREFIX: &str = "d.";
 const VOLUME_CRITIC_PREFIX: &str = "d3.";
+/// Checkpoint name prefix of the reconstruction noise's optimiser.
+const NOISE_OPT_PREFIX: &str = "opt_z.";
 
 /// How a call to [`train`] ended.
 pub enum TrainOutcome {
@@ -274,7 +283,8 @@ pub fn train(
             }
             // A function of the iteration alone, so a resumed run decays where it would have.
             let learning_rate = config.learning_rate_at(n, it);
-            stage.parts().set_learning_rate(learning_rate);
+            let noise_rate = config.reconstruction_noise_lr * learning_rate / config.learning_rate;
+            stage.parts().set_learning_rate(learning_rate, noise_rate);
             let losses = stage
                 .iteration(
                     it >= schedule.reconstruction_only,
@@ -520,6 +530,10 @@ fn save(
             // It steps with the scale's generator, so `g_steps` counts its steps too.
             tensors.extend(coarser.opt.state(&coarser.checkpoint_prefix()).0);
         }
+        if let Some(opt) = &parts.reconstruction_noise_opt {
+            // It steps with the scale's generator too.
+            tensors.extend(opt.state(NOISE_OPT_PREFIX).0);
+        }
         if let Some(critic) = &parts.volume_critic {
             // It steps with the 2D critic, so `d_steps` counts its steps too.
             tensors.extend(critic.opt.state("opt_d3.").0);
@@ -577,6 +591,10 @@ fn restore_stage(
         coarser
             .opt
             .restore(tensors, &prefix, g_steps)
+            .map_err(fail)?;
+    }
+    if let Some(opt) = parts.reconstruction_noise_opt {
+        opt.restore(tensors, NOISE_OPT_PREFIX, g_steps)
             .map_err(fail)?;
     }
     parts

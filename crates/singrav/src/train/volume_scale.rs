@@ -43,12 +43,15 @@ pub(super) struct VolumeScale<'a> {
     renderer: ViewRenderer,
     critic: Critic,
     opt: Adam,
+    /// The optimiser of this scale's reconstruction noise z*_n, when the run optimises it.
+    noise_opt: Option<Adam>,
     /// The coarser generators that train with this one (concurrent training), coarsest first.
     coarser: Vec<CoarserGenerator>,
     /// The reconstruction (raw) of the last frozen scale, below every generator that trains;
     /// `None` when scale 1 trains.
     frozen_reconstruction: Option<Tensor>,
-    /// The fixed reconstruction noise of the scales that train ({z*_1} or zeros).
+    /// The reconstruction noise of the scales that train ({z*_1}, zeros, or this scale's
+    /// optimised z*_n).
     reconstruction_noise: Vec<Tensor>,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
@@ -105,6 +108,16 @@ impl<'a> VolumeScale<'a> {
             .generator_vars(n)
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
         let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let noise_opt = model
+            .reconstruction_noise_var(n)
+            .map(|z| {
+                Adam::new(
+                    vec![("z_star".into(), z.clone())],
+                    config.reconstruction_noise_lr,
+                    config.betas,
+                )
+            })
+            .transpose()?;
         let coarser = CoarserGenerator::for_scale(model, config, n)?;
         let mut frozen_noise = model.reconstruction_noise(n)?;
         let reconstruction_noise = frozen_noise.split_off(n - 1 - coarser.len());
@@ -122,6 +135,7 @@ impl<'a> VolumeScale<'a> {
             renderer,
             critic,
             opt,
+            noise_opt,
             coarser,
             frozen_reconstruction,
             reconstruction_noise,
@@ -206,7 +220,8 @@ impl<'a> VolumeScale<'a> {
         self.run_trained(draw.frozen.as_ref(), &draw.trained_noise)
     }
 
-    /// The reconstruction V*_n from {z*_1, 0, ...}, differentiable in the generators that train.
+    /// The reconstruction V*_n from the reconstruction noise, differentiable in the generators
+    /// that train (and in this scale's z*_n when it is optimised).
     fn reconstruction(&self) -> Result<Tensor> {
         self.run_trained(
             self.frozen_reconstruction.as_ref(),
@@ -339,6 +354,9 @@ impl Stage for VolumeScale<'_> {
             }
             let grads = total.backward()?;
             self.opt.step(&grads)?;
+            if let Some(opt) = &mut self.noise_opt {
+                opt.step(&grads)?;
+            }
             for coarser in &mut self.coarser {
                 coarser.opt.step(&grads)?;
             }
@@ -385,6 +403,7 @@ impl Stage for VolumeScale<'_> {
             volume_critic: self.volume_critic.as_mut(),
             generator_opt: &mut self.opt,
             coarser_generators: &mut self.coarser,
+            reconstruction_noise_opt: self.noise_opt.as_mut(),
         }
     }
 }
