@@ -328,7 +328,7 @@ const CPU_HEIGHT_PROFILE: f64 = 50.0;
 
 /// Learning rate of the CPU presets' reconstruction noise z*_n (see
 /// [`TrainConfig::reconstruction_noise_lr`]): over three seeds V*'s volume gained 0.5 dB on
-/// `tiny` and the samples' colour SWD fell 11%; on `small` V*'s volume gained 3.6 dB at seed 0
+/// `tiny` and 3.4 dB on `small`, and the samples' colour SWD fell 11% and 8%
 /// (docs/training.md, "Optimised reconstruction noise").
 const CPU_RECONSTRUCTION_NOISE_LR: f64 = 0.05;
 

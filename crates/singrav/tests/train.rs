@@ -98,6 +98,34 @@ fn stop_at(scale: usize, iteration: usize) -> impl FnMut(&Progress) -> Control {
     }
 }
 
+/// Trains `config` into `dir` until it is killed in scale 2 after iteration 3 (its checkpoint
+/// every 2 iterations then holds iteration 2), asserts that checkpoint holds a tensor named
+/// `saved_prefix*`, resumes, and asserts the run ends with the tensors `finished`.
+fn killed_in_scale_2_resumes_to(
+    config: &TrainConfig,
+    data: &Dataset,
+    dir: &Path,
+    saved_prefix: &str,
+    finished: &HashMap<String, Tensor>,
+) {
+    let mut stop = stop_at(2, 3);
+    let outcome = train(
+        config,
+        data,
+        dir,
+        &RunOptions::default(),
+        &Device::Cpu,
+        &mut stop,
+    )
+    .unwrap();
+    assert!(matches!(outcome, TrainOutcome::Stopped));
+    assert!(checkpoint_tensors(dir)
+        .keys()
+        .any(|name| name.starts_with(saved_prefix)));
+    run_with(config, data, dir, &resume());
+    assert_same_tensors(finished, &checkpoint_tensors(dir));
+}
+
 /// The error of a training run that must fail.
 fn train_failure(config: &TrainConfig, data: &Dataset, run: &Path, options: &RunOptions) -> Error {
     train(config, data, run, options, &Device::Cpu, &mut |_| {
@@ -972,17 +1000,14 @@ fn concurrent_training_trains_the_coarser_generator_and_resumes() {
     run_to_end(&plain, &data, &plain_whole);
     assert_eq!(g1(&checkpoint_tensors(&plain_whole)), g1_plain);
 
-    // Killed in scale 2 after iteration 3: the checkpoint of iteration 2 holds G_1's optimiser.
-    let killed = tmp.path().join("killed");
-    let mut stop = stop_at(2, 3);
-    let options = RunOptions::default();
-    let outcome = train(&config, &data, &killed, &options, &Device::Cpu, &mut stop).unwrap();
-    assert!(matches!(outcome, TrainOutcome::Stopped));
-    assert!(checkpoint_tensors(&killed)
-        .keys()
-        .any(|name| name.starts_with("opt_g1.")));
-    run_with(&config, &data, &killed, &resume());
-    assert_same_tensors(&finished, &checkpoint_tensors(&killed));
+    // The checkpoint a kill leaves in scale 2 holds G_1's optimiser.
+    killed_in_scale_2_resumes_to(
+        &config,
+        &data,
+        &tmp.path().join("killed"),
+        "opt_g1.",
+        &finished,
+    );
 
     // One scale at a time, or concurrent scales with G_1 kept frozen (micro's G_2 is its last
     // 3D generator), is the paper's training.
@@ -1029,16 +1054,13 @@ fn optimised_reconstruction_noise_trains_is_saved_and_resumes() {
     let noise = model.reconstruction_noise(2).unwrap();
     assert_eq!(values(&noise[1]), z2);
 
-    let killed = tmp.path().join("killed");
-    let mut stop = stop_at(2, 3);
-    let options = RunOptions::default();
-    let outcome = train(&config, &data, &killed, &options, &Device::Cpu, &mut stop).unwrap();
-    assert!(matches!(outcome, TrainOutcome::Stopped));
-    assert!(checkpoint_tensors(&killed)
-        .keys()
-        .any(|name| name.starts_with("opt_z.")));
-    run_with(&config, &data, &killed, &resume());
-    assert_same_tensors(&finished, &checkpoint_tensors(&killed));
+    killed_in_scale_2_resumes_to(
+        &config,
+        &data,
+        &tmp.path().join("killed"),
+        "opt_z.",
+        &finished,
+    );
 
     let mut without_z2 = finished.clone();
     without_z2.remove("z_star.2");
