@@ -593,13 +593,25 @@ impl TrainConfig {
     /// # Ok::<(), singrav::Error>(())
     /// ```
     pub fn learning_rate_at(&self, n: usize, iteration: usize) -> f64 {
+        self.learning_rate * self.decay_at(n, iteration)
+    }
+
+    /// The reconstruction noise's learning rate at `iteration` of scale `n`: decayed with the
+    /// networks' ([`TrainConfig::learning_rate_at`]).
+    pub fn reconstruction_noise_lr_at(&self, n: usize, iteration: usize) -> f64 {
+        self.reconstruction_noise_lr * self.decay_at(n, iteration)
+    }
+
+    /// The factor `lr_decay` puts on the learning rates at `iteration` of scale `n` (1 before
+    /// the decay, and without one).
+    fn decay_at(&self, n: usize, iteration: usize) -> f64 {
         match self.lr_decay {
             Some(decay)
                 if iteration as f64 >= decay.at * self.scale_schedule(n).iterations as f64 =>
             {
-                self.learning_rate * decay.factor
+                decay.factor
             }
-            _ => self.learning_rate,
+            _ => 1.0,
         }
     }
 

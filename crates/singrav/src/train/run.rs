@@ -283,7 +283,7 @@ pub fn train(
             }
             // A function of the iteration alone, so a resumed run decays where it would have.
             let learning_rate = config.learning_rate_at(n, it);
-            let noise_rate = config.reconstruction_noise_lr * learning_rate / config.learning_rate;
+            let noise_rate = config.reconstruction_noise_lr_at(n, it);
             stage.parts().set_learning_rate(learning_rate, noise_rate);
             let losses = stage
                 .iteration(
