@@ -47,12 +47,14 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 12] = [
+const LOSS_COLUMNS: [(&str, &str); 14] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
     ("opacity", "opacity"),
     ("colour_distribution", "colour distribution"),
     ("height_profile", "height profile"),
+    ("opacity_binary", "binary opacity"),
+    ("opacity_distribution", "opacity distribution"),
     ("critic", "critic"),
     ("penalty", "gradient penalty"),
     ("adversarial", "adversarial"),

@@ -63,7 +63,8 @@ pub struct TrainOptions {
     #[arg(long)]
     pub no_depth: bool,
     /// Ablation: train without opacity supervision (the opacity reconstruction term, the
-    /// critics' opacity channel and the samples' height profile), as the paper.
+    /// critics' opacity channel and the samples' opacity terms: height profile, binary prior,
+    /// distribution), as the paper.
     #[arg(long)]
     pub no_opacity: bool,
     /// The paper's dense finer scales: every voxel may change at every 3D scale (turns off the
@@ -184,6 +185,8 @@ impl TrainOptions {
             config.lambda_opacity = 0.0;
             config.critic_opacity = false;
             config.lambda_height_profile = 0.0;
+            config.lambda_opacity_binary = 0.0;
+            config.lambda_opacity_distribution = 0.0;
         }
         config.seed = self.seed;
         if self.fitted.is_some() || self.fit {
@@ -450,6 +453,8 @@ fn format_losses(l: &StepLosses) -> String {
         ("opacity", l.opacity),
         ("colour", l.colour_distribution),
         ("height", l.height_profile),
+        ("binary", l.opacity_binary),
+        ("alpha-dist", l.opacity_distribution),
         ("D3", l.volume_critic),
         ("gp3", l.volume_penalty),
         ("adv3", l.volume_adversarial),

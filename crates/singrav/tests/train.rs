@@ -147,6 +147,8 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     // Every optional term and the active set on, so that each runs once.
     let mut config = micro();
     config.lambda_height_profile = 1.0;
+    config.lambda_opacity_binary = 1.0;
+    config.lambda_opacity_distribution = 1.0;
     config.sparse_from_scale = Some(2);
     config.sparse_shell = true;
     let run = tmp.path().join("run");
@@ -163,6 +165,8 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             l.opacity,
             l.colour_distribution,
             l.height_profile,
+            l.opacity_binary,
+            l.opacity_distribution,
         ];
         assert!(
             terms.iter().flatten().all(|v| v.is_finite()),
@@ -178,11 +182,10 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
         let compared =
             *scale < config.scales() && l.adversarial.is_some() && config.lambda_colour > 0.0;
         assert_eq!(l.colour_distribution.is_some(), compared, "scale {scale}");
-        assert_eq!(
-            l.height_profile.is_some(),
-            *scale < config.scales() && l.adversarial.is_some(),
-            "scale {scale}"
-        );
+        let on_samples = *scale < config.scales() && l.adversarial.is_some();
+        for term in [l.height_profile, l.opacity_binary, l.opacity_distribution] {
+            assert_eq!(term.is_some(), on_samples, "scale {scale}: {l:?}");
+        }
     }
     // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
     assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));

@@ -22,18 +22,30 @@ pub(super) fn colour_distribution_loss(
     real: &Tensor,
     rng: &mut impl rand::Rng,
 ) -> Result<Tensor> {
+    pixel_distribution_distance(generated, real, || {
+        Ok(Projections::random(3, DIRECTIONS, rng, generated.device())?)
+    })
+}
+
+/// The mean over views of the squared sliced W2 distance between the pixels of `generated`
+/// and `real` (both `(V, C, h, w)`) as point sets in C dimensions, along the directions
+/// `directions` gives for each view in turn.
+pub(super) fn pixel_distribution_distance(
+    generated: &Tensor,
+    real: &Tensor,
+    mut directions: impl FnMut() -> Result<Projections>,
+) -> Result<Tensor> {
     let views = generated.dim(0)?;
     let pixels = |images: &Tensor, v: usize| -> Result<Tensor> {
-        // (3, h, w) -> (h w, 3): one point per pixel.
+        // (C, h, w) -> (h w, C): one point per pixel.
         Ok(images.get(v)?.flatten_from(1)?.t()?.contiguous()?)
     };
     let mut per_view = Vec::with_capacity(views);
     for v in 0..views {
-        let directions = Projections::random(3, DIRECTIONS, rng, generated.device())?;
         per_view.push(sliced_wasserstein(
             &pixels(generated, v)?,
             &pixels(real, v)?,
-            &directions,
+            &directions()?,
             Metric::SquaredW2,
         )?);
     }

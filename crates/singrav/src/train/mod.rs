@@ -11,6 +11,7 @@ mod fitted;
 mod height_profile;
 mod log;
 mod run;
+mod sample_opacity;
 mod texture;
 mod volume_scale;
 
@@ -101,6 +102,12 @@ pub struct StepLosses {
     /// Weighted height-profile loss of the generated scenes (3D scales' adversarial iterations
     /// of runs with `lambda_height_profile > 0`).
     pub height_profile: Option<f32>,
+    /// Weighted binary-opacity prior of the generated scenes (3D scales' adversarial iterations
+    /// of runs with `lambda_opacity_binary > 0`).
+    pub opacity_binary: Option<f32>,
+    /// Weighted opacity-distribution loss of the generated scenes (3D scales' adversarial
+    /// iterations of runs with `lambda_opacity_distribution > 0`).
+    pub opacity_distribution: Option<f32>,
     /// The 3D critic's loss `mean D3(fake) - mean D3(fitted)` (3D scales' adversarial
     /// iterations of runs with `lambda_volume_critic > 0`).
     pub volume_critic: Option<f32>,

@@ -406,6 +406,8 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("opacity reconstruction", losses.opacity),
         ("colour distribution", losses.colour_distribution),
         ("height profile", losses.height_profile),
+        ("binary-opacity prior", losses.opacity_binary),
+        ("opacity distribution", losses.opacity_distribution),
         ("3D critic loss", losses.volume_critic),
         ("3D critic's gradient penalty", losses.volume_penalty),
         ("3D adversarial loss", losses.volume_adversarial),

@@ -14,6 +14,7 @@ use super::critic::{Critic, VolumeCritic};
 use super::fitted::FittedTarget;
 use super::height_profile::height_profile_loss;
 use super::run::{Stage, StageParts};
+use super::sample_opacity::{opacity_binary_loss, opacity_distribution_loss};
 use super::StepLosses;
 use crate::config::TrainConfig;
 use crate::dataset::DatasetLevel;
@@ -21,6 +22,9 @@ use crate::error::Result;
 use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
+
+/// A loss on the samples' rendered opacity against the real views' alpha (both `(V, 1, h, w)`).
+type OpacityLoss = fn(&Tensor, &Tensor) -> Result<Tensor>;
 
 /// One iteration's random draw: the noise of the scales that train (this one, and with
 /// concurrent training the coarser ones that train with it) and the volume of the frozen scales
@@ -279,6 +283,7 @@ impl Stage for VolumeScale<'_> {
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
         let (mut height_sum, mut volume_adversarial_sum) = (0.0, 0.0);
+        let (mut binary_sum, mut distribution_sum) = (0.0f32, 0.0f32);
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
@@ -311,13 +316,35 @@ impl Stage for VolumeScale<'_> {
                     colour_sum_generated += loss.to_scalar::<f32>()?;
                     total = (total + loss)?;
                 }
-                if self.config.lambda_height_profile > 0.0 {
-                    let channels = fake.dim(1)?;
+                let opacity_terms: [(f64, &mut f32, OpacityLoss); 3] = [
+                    (
+                        self.config.lambda_height_profile,
+                        &mut height_sum,
+                        height_profile_loss,
+                    ),
+                    (
+                        self.config.opacity_binary_weight(self.n),
+                        &mut binary_sum,
+                        |opacity, _| opacity_binary_loss(opacity),
+                    ),
+                    (
+                        self.config.lambda_opacity_distribution,
+                        &mut distribution_sum,
+                        opacity_distribution_loss,
+                    ),
+                ];
+                if opacity_terms.iter().any(|(weight, ..)| *weight > 0.0) {
+                    // Validation keeps these weights at 0 unless the critics' views end with
+                    // the rendered opacity.
+                    let opacity = fake.narrow(1, fake.dim(1)? - 1, 1)?;
                     let alpha = select(&self.level.opacity, &fake_views)?;
-                    let loss = (height_profile_loss(&fake.narrow(1, channels - 1, 1)?, &alpha)?
-                        * self.config.lambda_height_profile)?;
-                    height_sum += loss.to_scalar::<f32>()?;
-                    total = (total + loss)?;
+                    for (weight, sum, loss) in opacity_terms {
+                        if weight > 0.0 {
+                            let loss = (loss(&opacity, &alpha)? * weight)?;
+                            *sum += loss.to_scalar::<f32>()?;
+                            total = (total + loss)?;
+                        }
+                    }
                 }
             }
             let rec_views = pick_views(rng, views, self.config.views(self.n).reconstruction);
@@ -374,6 +401,11 @@ impl Stage for VolumeScale<'_> {
             .then_some(colour_sum_generated / steps);
         losses.height_profile =
             (adversarial && self.config.lambda_height_profile > 0.0).then_some(height_sum / steps);
+        losses.opacity_binary = (adversarial && self.config.opacity_binary_weight(self.n) > 0.0)
+            .then_some(binary_sum / steps);
+        losses.opacity_distribution = (adversarial
+            && self.config.lambda_opacity_distribution > 0.0)
+            .then_some(distribution_sum / steps);
         Ok(losses)
     }
 
