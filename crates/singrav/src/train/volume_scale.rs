@@ -282,8 +282,19 @@ impl Stage for VolumeScale<'_> {
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
-        let (mut height_sum, mut volume_adversarial_sum) = (0.0, 0.0);
-        let (mut binary_sum, mut distribution_sum) = (0.0f32, 0.0f32);
+        let mut volume_adversarial_sum = 0.0;
+        // The terms on the samples' rendered opacity, each with its weight at this scale.
+        let opacity_terms: [(f64, OpacityLoss); 3] = [
+            (self.config.lambda_height_profile, height_profile_loss),
+            (self.config.opacity_binary_weight(self.n), |opacity, _| {
+                opacity_binary_loss(opacity)
+            }),
+            (
+                self.config.lambda_opacity_distribution,
+                opacity_distribution_loss,
+            ),
+        ];
+        let mut opacity_sums = [0.0f32; 3];
         for _ in 0..self.config.g_steps {
             let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
             if let Some(draw) = &draw {
@@ -316,31 +327,14 @@ impl Stage for VolumeScale<'_> {
                     colour_sum_generated += loss.to_scalar::<f32>()?;
                     total = (total + loss)?;
                 }
-                let opacity_terms: [(f64, &mut f32, OpacityLoss); 3] = [
-                    (
-                        self.config.lambda_height_profile,
-                        &mut height_sum,
-                        height_profile_loss,
-                    ),
-                    (
-                        self.config.opacity_binary_weight(self.n),
-                        &mut binary_sum,
-                        |opacity, _| opacity_binary_loss(opacity),
-                    ),
-                    (
-                        self.config.lambda_opacity_distribution,
-                        &mut distribution_sum,
-                        opacity_distribution_loss,
-                    ),
-                ];
                 if opacity_terms.iter().any(|(weight, ..)| *weight > 0.0) {
                     // Validation keeps these weights at 0 unless the critics' views end with
                     // the rendered opacity.
                     let opacity = fake.narrow(1, fake.dim(1)? - 1, 1)?;
                     let alpha = select(&self.level.opacity, &fake_views)?;
-                    for (weight, sum, loss) in opacity_terms {
-                        if weight > 0.0 {
-                            let loss = (loss(&opacity, &alpha)? * weight)?;
+                    for ((weight, loss), sum) in opacity_terms.iter().zip(&mut opacity_sums) {
+                        if *weight > 0.0 {
+                            let loss = (loss(&opacity, &alpha)? * *weight)?;
                             *sum += loss.to_scalar::<f32>()?;
                             total = (total + loss)?;
                         }
@@ -399,13 +393,12 @@ impl Stage for VolumeScale<'_> {
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
         losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
             .then_some(colour_sum_generated / steps);
-        losses.height_profile =
-            (adversarial && self.config.lambda_height_profile > 0.0).then_some(height_sum / steps);
-        losses.opacity_binary = (adversarial && self.config.opacity_binary_weight(self.n) > 0.0)
-            .then_some(binary_sum / steps);
-        losses.opacity_distribution = (adversarial
-            && self.config.lambda_opacity_distribution > 0.0)
-            .then_some(distribution_sum / steps);
+        let reported = |term: usize| {
+            (adversarial && opacity_terms[term].0 > 0.0).then_some(opacity_sums[term] / steps)
+        };
+        losses.height_profile = reported(0);
+        losses.opacity_binary = reported(1);
+        losses.opacity_distribution = reported(2);
         Ok(losses)
     }
 
