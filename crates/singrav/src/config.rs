@@ -543,7 +543,8 @@ impl TrainConfig {
             "paper" => Ok(paper),
             "small" => Ok(cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS)),
             "tiny" => Ok(Self {
-                // Measured on `tiny` only (docs/training.md, "Opacity priors on the samples").
+                // `tiny` only: on `small` the prior cost colour, V* and diversity
+                // (docs/training.md, "Opacity priors on the samples").
                 lambda_opacity_binary: TINY_OPACITY_BINARY,
                 opacity_binary_until_scale: Some(TINY_OPACITY_BINARY_UNTIL_SCALE),
                 ..cpu_recipe(scaled("tiny", 4, 16, 24), &TINY_ITERATIONS)
@@ -1343,8 +1344,8 @@ mod tests {
             .schedule
             .iter()
             .all(|s| s.reconstruction_only * 4 == s.iterations));
-        // Everything but the sizes, the schedule and the binary-opacity prior (measured on
-        // tiny only) is tiny's.
+        // Everything but the sizes, the schedule and the binary-opacity prior (which cost
+        // small colour, V* and diversity) is tiny's.
         assert_eq!(small.lambda_opacity_binary, 0.0);
         let resized = TrainConfig {
             lambda_opacity_binary: tiny.lambda_opacity_binary,
