@@ -20,6 +20,7 @@
 
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
+use singrav::active_set::{active_mask, ActiveSetRule};
 use singrav::SinGrav;
 
 /// Opacity across a voxel above which it counts as matter.
@@ -104,42 +105,48 @@ impl ColourSum {
     }
 }
 
+/// The density above which a voxel of side `voxel` is more than `opacity` opaque across:
+/// `1 - exp(-sigma * voxel) > opacity`.
+fn density_for_opacity(opacity: f32, voxel: f32) -> f32 {
+    -(1.0 - opacity).ln() / voxel
+}
+
 /// The matter's and the halo's colour sums of a raw volume `(1, 4, s, s, s)`.
 fn classify(model: &SinGrav, raw: &Tensor, above: f32) -> singrav::Result<[ColourSum; 2]> {
-    let physical = model.config().activation().apply(&raw.squeeze(0)?)?;
+    let activation = model.config().activation();
+    let physical = activation.apply(&raw.squeeze(0)?)?;
     let size = physical.dim(1)?;
     let voxel = 2.0 / size as f32;
+    let matter_density = density_for_opacity(MATTER, voxel);
+    // Within one voxel (the 26 neighbours) of matter: the active set's own dilation.
+    let beside_matter = ActiveSetRule {
+        threshold: matter_density,
+        margin: 1,
+        shell: false,
+    };
+    let beside_matter: Vec<f32> = active_mask(raw, &activation, &beside_matter)?
+        .flatten_all()?
+        .to_vec1()?;
     let values: Vec<f32> = physical.flatten_all()?.to_vec1()?;
     let cells = size * size * size;
-    let opacity: Vec<f32> = values[..cells]
-        .iter()
-        .map(|sigma| 1.0 - (-sigma * voxel).exp())
-        .collect();
-    let index = |z: usize, y: usize, x: usize| (z * size + y) * size + x;
-    let beside_matter = |z: usize, y: usize, x: usize| {
-        let around = |c: usize| c.saturating_sub(1)..=(c + 1).min(size - 1);
-        around(z)
-            .any(|zz| around(y).any(|yy| around(x).any(|xx| opacity[index(zz, yy, xx)] > MATTER)))
-    };
     let (mut matter, mut halo) = (ColourSum::default(), ColourSum::default());
-    for z in 0..size {
-        if -1.0 + (z as f32 + 0.5) * voxel <= above {
-            continue;
-        }
-        for y in 0..size {
-            for x in 0..size {
-                let i = index(z, y, x);
-                let rgb = [
-                    values[cells + i],
-                    values[2 * cells + i],
-                    values[3 * cells + i],
-                ];
-                if opacity[i] > MATTER {
-                    matter.add(rgb);
-                } else if opacity[i] < CLEAR && beside_matter(z, y, x) {
-                    halo.add(rgb);
-                }
-            }
+    // Voxels are stored z-major: the first `skipped` lie at or below height `above`.
+    let skipped = (0..size)
+        .take_while(|&z| -1.0 + (z as f32 + 0.5) * voxel <= above)
+        .count()
+        * size
+        * size;
+    for i in skipped..cells {
+        let sigma = values[i];
+        let rgb = [
+            values[cells + i],
+            values[2 * cells + i],
+            values[3 * cells + i],
+        ];
+        if sigma > matter_density {
+            matter.add(rgb);
+        } else if sigma < density_for_opacity(CLEAR, voxel) && beside_matter[i] > 0.0 {
+            halo.add(rgb);
         }
     }
     Ok([matter, halo])
