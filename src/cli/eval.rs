@@ -302,6 +302,7 @@ fn volume_psnr(
 ) -> Result<f64> {
     let config = FitConfig {
         background: model.config().background,
+        colour_interpolation: model.config().colour_interpolation(),
         ..FitConfig::default()
     };
     let per_view = view_psnr(volume, dataset, frames, &config)?;

@@ -66,6 +66,10 @@ pub struct FitArgs {
     /// Fit colour and opacity only, ignoring the dataset's depth.
     #[arg(long)]
     no_depth: bool,
+    /// Render with density-weighted colour (the colours of clear voxels never show), as a
+    /// SinGRAV run trained with `--set density_weighted_colour=true` renders.
+    #[arg(long)]
+    density_weighted_colour: bool,
     /// Seed of the ray draws.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -190,6 +194,11 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
         },
         use_depth: !args.no_depth,
         seed: args.seed,
+        colour_interpolation: if args.density_weighted_colour {
+            volrender::ColourInterpolation::DensityWeighted
+        } else {
+            volrender::ColourInterpolation::Separate
+        },
         ..defaults
     };
     config.validate()?;

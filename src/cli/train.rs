@@ -265,6 +265,7 @@ fn fit_for_training(
         background: config.background,
         use_depth: config.use_depth,
         seed: config.seed,
+        colour_interpolation: config.colour_interpolation(),
         budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
         // In the scene's coordinates, over the model's cube there.
         aabb: config

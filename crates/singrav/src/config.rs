@@ -179,6 +179,19 @@ pub struct TrainConfig {
     pub density_shift: f32,
     /// The colour transparent pixels are composited onto, in data and renderings.
     pub background: [f32; 3],
+    /// Render with density-weighted colour ([`volrender::ColourInterpolation::DensityWeighted`]):
+    /// a sample's colour is the density-weighted mean of its voxels' colours, so the colours of
+    /// clear voxels beside matter never show and matter renders its own voxels' colour. `false`
+    /// (the paper's renderer, and runs made before it existed): colour interpolated on its own.
+    #[serde(default)]
+    pub density_weighted_colour: bool,
+    /// Early ray termination of training's renders ([`volrender::RenderConfig::epsilon`]): a ray
+    /// stops once its transmittance is at most this, so the samples behind opaque ground and
+    /// stones are neither rendered nor differentiated; colour and opacity change by at most
+    /// this much. 0 (exact; runs made before it existed) renders every sample. The metrics of
+    /// `volgen eval` always render exactly.
+    #[serde(default)]
+    pub render_epsilon: f32,
     /// Ablation switch: the SWD loss at the last scale.
     pub use_swd: bool,
     /// The features the SWD loss compares. Recorded so that a resumed run cannot switch them;
@@ -510,6 +523,8 @@ impl TrainConfig {
             density_scale: 25.0,
             density_shift: -4.0,
             background: [1.0, 1.0, 1.0],
+            density_weighted_colour: false,
+            render_epsilon: 0.0,
             use_swd: true,
             swd_features: SwdFeatures::PatchPyramid,
             use_csg: true,
@@ -797,6 +812,15 @@ impl TrainConfig {
         })
     }
 
+    /// The renderer's colour rule for [`TrainConfig::density_weighted_colour`].
+    pub fn colour_interpolation(&self) -> volrender::ColourInterpolation {
+        if self.density_weighted_colour {
+            volrender::ColourInterpolation::DensityWeighted
+        } else {
+            volrender::ColourInterpolation::Separate
+        }
+    }
+
     /// Checks that the sizes agree and every setting is in range.
     pub fn validate(&self) -> Result<()> {
         check_weight("lambda_fitted", self.lambda_fitted)?;
@@ -808,6 +832,15 @@ impl TrainConfig {
         )?;
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;
+        }
+        if !(0.0..1.0).contains(&self.render_epsilon) {
+            return Err(invalid(
+                "render_epsilon",
+                format!(
+                    "expected a transmittance in [0, 1), got {}",
+                    self.render_epsilon
+                ),
+            ));
         }
         // The terms on the samples' rendered opacity read it from the critics' views.
         for (field, weight) in [
@@ -1055,6 +1088,8 @@ mod tests {
             "lambda_opacity_binary",
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
+            "density_weighted_colour",
+            "render_epsilon",
             "sparse_from_scale",
             "sparse_threshold",
             "sparse_margin",
@@ -1072,6 +1107,8 @@ mod tests {
         assert_eq!(old.lambda_opacity_binary, 0.0);
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);
+        assert!(!old.density_weighted_colour);
+        assert_eq!(old.render_epsilon, 0.0);
         assert_eq!(old.sparse_from_scale, None);
         assert!(!old.sparse_shell);
         assert_eq!(old.views(1), ScaleViews::same(old.views_per_step));
@@ -1108,6 +1145,8 @@ mod tests {
             assert!(err.contains("sparse_threshold"), "{err}");
         }
         refused("reconstruction_noise_lr", "-0.01");
+        refused("render_epsilon", "-0.001");
+        refused("render_epsilon", "1");
         // micro has two 3D scales.
         refused("opacity_binary_until_scale", "0");
         refused("opacity_binary_until_scale", "3");

@@ -64,6 +64,29 @@ pub struct Outputs {
     pub opacity: bool,
 }
 
+/// How a sample between voxel centres gets its colour.
+///
+/// ```
+/// use volrender::{ColourInterpolation, RenderConfig};
+/// let cfg = RenderConfig::default().with_colour_interpolation(ColourInterpolation::DensityWeighted);
+/// assert_eq!(RenderConfig::default().colour_interpolation, ColourInterpolation::Separate);
+/// # let _ = cfg;
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ColourInterpolation {
+    /// Colour is interpolated trilinearly on its own, like density (the paper's renderer and
+    /// most voxel renderers): a sample half-way between a dense grey voxel and an empty green
+    /// one is half as dense and grey-green, so the colours of empty voxels beside matter show.
+    #[default]
+    Separate,
+    /// Colour is the density-weighted mean of the corners' colours,
+    /// `c = sum_k w_k sigma_k c_k / sum_k w_k sigma_k` (premultiplied colour interpolated and
+    /// divided by the interpolated density; 0 where that density is at most 1e-30). Empty
+    /// voxels' colours then never show, and matter shows its own voxels' colour right up to
+    /// its edge. The backward is exact (`tests/gradients.rs` holds it to finite differences).
+    DensityWeighted,
+}
+
 /// Options of [`render`](crate::render).
 ///
 /// ```
@@ -100,6 +123,8 @@ pub struct RenderConfig {
     pub outputs: Outputs,
     /// The world box the volume's grid covers (default `[-1, 1]^3`).
     pub aabb: Aabb,
+    /// How samples interpolate colour (default: [`ColourInterpolation::Separate`]).
+    pub colour_interpolation: ColourInterpolation,
 }
 
 impl Default for RenderConfig {
@@ -112,6 +137,7 @@ impl Default for RenderConfig {
             background: None,
             outputs: Outputs::default(),
             aabb: Aabb::CUBE,
+            colour_interpolation: ColourInterpolation::Separate,
         }
     }
 }
@@ -172,6 +198,15 @@ impl RenderConfig {
     #[must_use]
     pub fn with_aabb(self, aabb: Aabb) -> Self {
         Self { aabb, ..self }
+    }
+
+    /// Sets how samples interpolate colour.
+    #[must_use]
+    pub fn with_colour_interpolation(self, colour_interpolation: ColourInterpolation) -> Self {
+        Self {
+            colour_interpolation,
+            ..self
+        }
     }
 
     /// Checks the options: at least one sample, `epsilon` in [0, 1), finite background, a valid

@@ -18,7 +18,9 @@ use radiance_volume::GridDims;
 use rayon::prelude::*;
 
 use crate::buffer_pool::{self, Pooled};
-use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE};
+use crate::config::{
+    ColourInterpolation, RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE,
+};
 use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
@@ -219,7 +221,8 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             .contiguous_offsets()
             .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
         let values = &T::cpu_storage_as_slice(cpu)?[start..end];
-        let volumes = interleave(values, rays.len(), channels, dims)?;
+        let density_weighted = cfg.colour_interpolation == ColourInterpolation::DensityWeighted;
+        let volumes = interleave(values, rays.len(), channels, dims, density_weighted)?;
         let voxels = dims.voxel_count();
         let empty_blocks = occupancy
             .iter()
@@ -248,12 +251,18 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
         })
     }
 
+    /// Whether the kernels read premultiplied colours.
+    fn density_weighted(&self) -> bool {
+        self.cfg.colour_interpolation == ColourInterpolation::DensityWeighted
+    }
+
     /// The kernel for volume `b`.
     fn kernel(&self, b: usize) -> RayKernel<'_, T> {
         RayKernel {
             volume: VolumeView {
                 data: &self.volumes[b],
                 n: self.grid.n,
+                density_weighted: self.density_weighted(),
             },
             occupancy: self.occupancy.get(b).map(|o| OccView {
                 distance: &o.distance,
@@ -289,8 +298,9 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
     }
 
     /// Returns the gradient `(N, C, D, H, W)` (planar, channels >= 4 zero) given the forward's
-    /// packed output and its gradient.
-    fn backward(&self, res: &[T], grad: &[T]) -> Vec<T> {
+    /// packed output and its gradient; `values` is the volume tensor's data, which the chain
+    /// rule through premultiplied colours needs (`None` when colours are not premultiplied).
+    fn backward(&self, res: &[T], grad: &[T], values: Option<&[T]>) -> Vec<T> {
         let voxels = self.dims.voxel_count();
         let mut out = vec![T::zero(); self.rays.len() * self.channels * voxels];
         let mut first_ray = 0;
@@ -339,6 +349,10 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
                                 acc[c] += buf[v][c];
                             }
                         }
+                        if let Some(values) = values {
+                            let at = |c: usize| values[(b * self.channels + c) * voxels + v];
+                            acc = premultiplied_to_volume_gradient([0, 1, 2, 3].map(at), acc);
+                        }
                         (s[j], r[j], g[j], bl[j]) = (acc[0], acc[1], acc[2], acc[3]);
                     }
                 });
@@ -356,12 +370,15 @@ impl<T: Pooled> Drop for CompositeOp<T> {
 }
 
 /// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`
-/// per voxel, checking in the same pass that every value is finite and every density >= 0.
+/// per voxel (premultiplied, `[sigma, sigma r, sigma g, sigma b]`, when `density_weighted`),
+/// checking in the same pass that every value is finite, every density >= 0 and every
+/// premultiplied colour finite.
 fn interleave<T: Pooled>(
     values: &[T],
     n: usize,
     channels: usize,
     dims: GridDims,
+    density_weighted: bool,
 ) -> Result<Vec<Vec<[T; 4]>>> {
     /// Voxels per parallel task.
     const CHUNK: usize = 4096;
@@ -376,47 +393,80 @@ fn interleave<T: Pooled>(
             x.abs() <= limit
         }
     };
-    let bad = |v: &[T; 4]| !(0..4).all(|c| value_ok(c, v[c]));
+    let premultiply = |v: [T; 4]| {
+        if density_weighted {
+            [v[0], v[0] * v[1], v[0] * v[2], v[0] * v[3]]
+        } else {
+            v
+        }
+    };
+    // The first channel whose value is refused (`4`: the premultiplied colour overflows).
+    let refused = |v: &[T; 4]| {
+        (0..4).find(|&c| !value_ok(c, v[c])).or_else(|| {
+            (density_weighted && !premultiply(*v).iter().all(|x| x.is_finite())).then_some(4)
+        })
+    };
     (0..n)
         .map(|b| {
             let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
+            let voxel = |i: usize| [0, 1, 2, 3].map(|c| vol[c * voxels + i]);
             let mut data = buffer_pool::take::<T>(voxels);
             let count: usize = data
                 .par_chunks_mut(CHUNK)
                 .enumerate()
                 .map(|(chunk, out)| {
                     let start = chunk * CHUNK;
-                    let planes = [0, 1, 2, 3].map(|c| {
-                        let plane = c * voxels + start;
-                        &vol[plane..plane + out.len()]
-                    });
                     let mut count = 0;
                     for (i, cell) in out.iter_mut().enumerate() {
-                        *cell = planes.map(|p| p[i]);
-                        count += usize::from(bad(cell));
+                        let v = voxel(start + i);
+                        count += usize::from(refused(&v).is_some());
+                        *cell = premultiply(v);
                     }
                     count
                 })
                 .sum();
             if count > 0 {
                 // (The buffer is not given back: errors are not the path to optimise.)
-                let i = data.iter().position(bad).unwrap_or(0);
-                let c = (0..4).find(|&c| !value_ok(c, data[i][c])).unwrap_or(0);
+                let (i, c) = (0..voxels)
+                    .find_map(|i| refused(&voxel(i)).map(|c| (i, c)))
+                    .unwrap_or((0, 0));
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
-                return Err(Error::InvalidVolume {
-                    count,
-                    first: format!(
+                let first = if c < 4 {
+                    format!(
                         "volume {b}, channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {:?}",
                         radiance_volume::BASE_CHANNELS[c],
-                        data[i][c]
-                    ),
+                        voxel(i)[c]
+                    )
+                } else {
+                    format!(
+                        "volume {b}, voxel (d={z}, h={y}, w={x}): density x colour overflows \
+                         ({:?})",
+                        voxel(i)
+                    )
+                };
+                return Err(Error::InvalidVolume {
+                    count,
+                    first,
                     why: "density (channel 0) must be finite and >= 0, colours finite and at \
-                          most 1e10 in magnitude",
+                          most 1e10 in magnitude, and with density-weighted colour their \
+                          products finite",
                 });
             }
             Ok(data)
         })
         .collect()
+}
+
+/// The chain rule from a voxel's premultiplied values `[sigma, sigma c]` to the volume's own
+/// `[sigma, c]` (`voxel`): `d sigma += sum_k g_k c_k`, `d c_k = g_k sigma`.
+fn premultiplied_to_volume_gradient<T: Real>(voxel: [T; 4], g: [T; 4]) -> [T; 4] {
+    let sigma = voxel[0];
+    [
+        g[0] + g[1] * voxel[1] + g[2] * voxel[2] + g[3] * voxel[3],
+        g[1] * sigma,
+        g[2] * sigma,
+        g[3] * sigma,
+    ]
 }
 
 impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
@@ -452,7 +502,12 @@ impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
     ) -> candle_core::Result<Option<Tensor>> {
         let res: Vec<T> = res.flatten_all()?.to_vec1()?;
         let grad: Vec<T> = grad_res.flatten_all()?.to_vec1()?;
-        let g = self.backward(&res, &grad);
+        let values: Option<Vec<T>> = if self.density_weighted() {
+            Some(arg.flatten_all()?.to_vec1()?)
+        } else {
+            None
+        };
+        let g = self.backward(&res, &grad, values.as_deref());
         Ok(Some(Tensor::from_vec(g, arg.shape(), arg.device())?))
     }
 }

@@ -10,14 +10,14 @@
 use candle_core::{Device, Tensor};
 use radiance_volume::GridDims;
 
-use crate::config::{RenderConfig, Sampler};
+use crate::config::{ColourInterpolation, RenderConfig, Sampler};
 use crate::error::{invalid, Result};
 use crate::kernel::{corners, setup_ray};
 use crate::op::{grid_spec, RenderOutput};
 use crate::rays::Rays;
 
 /// Renders `(C, D, H, W)` along `rays` with candle ops; supports the `Uniform` and `UniformLeft`
-/// samplers, the background and both extra outputs (always returned), but neither early
+/// samplers, both colour interpolations, the background and both extra outputs (always returned), but neither early
 /// termination nor skipping (they do not change its result when `epsilon` is 0).
 ///
 /// ```
@@ -82,7 +82,13 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
     let t = Tensor::from_vec(ts, (r, m), dev)?.to_dtype(dtype)?;
     let dt = Tensor::from_vec(dts, (r, 1), dev)?.to_dtype(dtype)?;
 
-    let flat = volume.narrow(0, 0, 4)?.reshape((4, dims.voxel_count()))?;
+    let mut flat = volume.narrow(0, 0, 4)?.reshape((4, dims.voxel_count()))?;
+    let density_weighted = cfg.colour_interpolation == ColourInterpolation::DensityWeighted;
+    if density_weighted {
+        let sigma = flat.narrow(0, 0, 1)?;
+        let premultiplied = flat.narrow(0, 1, 3)?.broadcast_mul(&sigma)?;
+        flat = Tensor::cat(&[&sigma, &premultiplied], 0)?;
+    }
     let values = flat
         .index_select(&idx, 1)?
         .broadcast_mul(&weights)?
@@ -90,7 +96,18 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
         .sum(2)?
         .reshape((4, r, m))?;
     let sigma = values.get(0)?;
-    let rgb = values.narrow(0, 1, 3)?;
+    let mut rgb = values.narrow(0, 1, 3)?;
+    if density_weighted {
+        // The kernel's rule: colour P / sigma, 0 where sigma <= 1e-30.
+        let weighted = sigma.gt(1e-30)?;
+        let safe = weighted.where_cond(&sigma, &sigma.ones_like()?)?;
+        let quotient = rgb.broadcast_div(&safe.unsqueeze(0)?)?;
+        let zeros = quotient.zeros_like()?;
+        rgb = weighted
+            .unsqueeze(0)?
+            .broadcast_as(quotient.shape())?
+            .where_cond(&quotient, &zeros)?;
+    }
     let tau = sigma.broadcast_mul(&dt)?;
     let cum = tau.cumsum(1)?;
     let trans = (cum.clone() - &tau)?.neg()?.exp()?;

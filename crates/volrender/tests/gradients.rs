@@ -9,7 +9,9 @@ mod common;
 use candle_core::{DType, Device, Tensor, Var};
 use proptest::prelude::*;
 use volrender::reference::render_reference;
-use volrender::{render, render_batch, Rays, RenderConfig, RenderOutput, Sampler};
+use volrender::{
+    render, render_batch, ColourInterpolation, Rays, RenderConfig, RenderOutput, Sampler,
+};
 
 use common::{mixed_rays, random_volume, rng, values};
 
@@ -56,6 +58,14 @@ fn check_fd(vol: &Tensor, f: impl Fn(&Tensor) -> f64, analytic: &[f64]) {
     }
 }
 
+fn interpolation(density_weighted: bool) -> ColourInterpolation {
+    if density_weighted {
+        ColourInterpolation::DensityWeighted
+    } else {
+        ColourInterpolation::Separate
+    }
+}
+
 fn sampler(kind: u8, n: usize) -> Sampler {
     match kind {
         0 => Sampler::Uniform { samples: n },
@@ -72,7 +82,7 @@ proptest! {
     #[test]
     fn backward_matches_finite_differences(
         d in 1usize..4, h in 1usize..4, w in 1usize..4, seed in any::<u64>(),
-        samples in 1usize..10, kind in 0u8..3, background in any::<bool>(),
+        samples in 1usize..10, kind in 0u8..3, background in any::<bool>(), weighted in any::<bool>(),
     ) {
         let mut r = rng(seed);
         let vol = random_volume(&mut r, [d, h, w], 4.0, DType::F64);
@@ -80,7 +90,8 @@ proptest! {
         let mut cfg = RenderConfig::default()
             .with_sampler(sampler(kind, samples))
             .with_depth(true)
-            .with_opacity(true);
+            .with_opacity(true)
+            .with_colour_interpolation(interpolation(weighted));
         if background {
             cfg = cfg.with_background([0.3, 0.9, 0.1]);
         }
@@ -109,14 +120,16 @@ proptest! {
         check_fd(&vols, |v| values(&total(v))[0], &analytic);
     }
 
-    /// The fast kernel and the candle-ops reference agree on values and gradients (f64).
+    /// The fast kernel and the candle-ops reference agree on values and gradients (f64), with
+    /// both colour interpolations.
     #[test]
-    fn kernel_matches_reference(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>()) {
+    fn kernel_matches_reference(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>(), weighted in any::<bool>()) {
         let mut r = rng(seed);
         let vol = random_volume(&mut r, [3, 4, 2], 5.0, DType::F64);
         let rays = mixed_rays(&mut r, 4);
         let s = if left { Sampler::UniformLeft { samples } } else { Sampler::Uniform { samples } };
-        let cfg = RenderConfig::default().with_sampler(s).with_depth(true).with_opacity(true).with_background([1.0, 0.5, 0.0]);
+        let cfg = RenderConfig::default().with_sampler(s).with_depth(true).with_opacity(true).with_background([1.0, 0.5, 0.0])
+            .with_colour_interpolation(interpolation(weighted));
         let weights = loss_weights(rays.len(), seed);
         let var = Var::from_tensor(&vol).unwrap();
         let fast = render(var.as_tensor(), &rays, &cfg).unwrap();

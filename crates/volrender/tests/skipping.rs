@@ -4,7 +4,7 @@ mod common;
 
 use candle_core::{DType, Var};
 use proptest::prelude::*;
-use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+use volrender::{render, Camera, ColourInterpolation, Rays, RenderConfig, Sampler};
 
 use common::{random_volume, rng, sparse_volume, values};
 
@@ -21,13 +21,15 @@ proptest! {
     /// empty voxels, so only empty voxels lose gradient terms).
     #[test]
     fn skipping_is_exact(seed in any::<u64>(), n in 4usize..14, balls in 0usize..4, cell in 1usize..6,
-                         per_voxel in any::<bool>(), epsilon in prop::sample::select(vec![0.0f32, 1e-3])) {
+                         per_voxel in any::<bool>(), epsilon in prop::sample::select(vec![0.0f32, 1e-3]),
+                         weighted in any::<bool>()) {
         let mut r = rng(seed);
         let vol = sparse_volume(&mut r, n, balls, 30.0);
         let rays = camera_rays(seed, 12);
         let sampler = if per_voxel { Sampler::PerVoxel { per_voxel: 2 } } else { Sampler::Uniform { samples: 37 } };
         let base = RenderConfig { occupancy_cell: cell, ..RenderConfig::default() }
-            .with_sampler(sampler).with_epsilon(epsilon).with_depth(true).with_opacity(true).with_background([0.1, 0.2, 0.3]);
+            .with_sampler(sampler).with_epsilon(epsilon).with_depth(true).with_opacity(true).with_background([0.1, 0.2, 0.3])
+            .with_colour_interpolation(if weighted { ColourInterpolation::DensityWeighted } else { ColourInterpolation::Separate });
         let run = |skip: bool| {
             let var = Var::from_tensor(&vol).unwrap();
             let out = render(var.as_tensor(), &rays, &base.with_skip_empty(skip)).unwrap();

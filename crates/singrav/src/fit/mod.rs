@@ -39,7 +39,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor, Var};
 use radiance_volume::{Aabb, Activation, RadianceVolume};
 use rand::SeedableRng;
-use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+use volrender::{render, Camera, ColourInterpolation, Rays, RenderConfig, Sampler};
 
 use crate::dataset::Dataset;
 use crate::error::{invalid, Result};
@@ -102,6 +102,8 @@ pub struct FitConfig {
     pub use_depth: bool,
     /// Seed of the ray draws.
     pub seed: u64,
+    /// How the renderer interpolates colour (a SinGRAV run's, when the fit is its target).
+    pub colour_interpolation: ColourInterpolation,
 }
 
 impl Default for FitConfig {
@@ -131,6 +133,7 @@ impl Default for FitConfig {
             aabb: Aabb::CUBE,
             use_depth: true,
             seed: 0,
+            colour_interpolation: training.colour_interpolation(),
         }
     }
 }
@@ -202,6 +205,7 @@ impl FitConfig {
             .with_skip_empty(true)
             .with_background(self.background)
             .with_aabb(self.aabb)
+            .with_colour_interpolation(self.colour_interpolation)
     }
 
     /// The grid edge at budget fraction `fraction`: geometric steps from `start_size` to

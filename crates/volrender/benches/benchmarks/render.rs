@@ -1,12 +1,13 @@
 //! `volrender/composite_fwd` and `volrender/composite_fwdbwd`: grids 32/64/128, 64 and 128
 //! samples, dense and sparse scenes, skipping off and on, 1 and 2 threads, on the peer's camera
-//! with 4096 rays. Throughput is samples (rays x samples per ray), so criterion reports
+//! with 4096 rays; and with density-weighted colour (`-weighted`) on both scenes at grid 64, 128
+//! samples, 2 threads, skipping off and on. Throughput is samples (rays x samples per ray), so criterion reports
 //! samples/s; rays/s is that divided by the samples per ray.
 
 use candle_core::{Tensor, Var};
 use criterion::{BenchmarkId, Criterion, Throughput};
 use volrender::scenes::{make_scene, peer_rays, Scene};
-use volrender::{render, Rays, RenderConfig, Sampler};
+use volrender::{render, ColourInterpolation, Rays, RenderConfig, Sampler};
 
 const RAYS: usize = 4096;
 
@@ -16,6 +17,7 @@ struct Case {
     samples: usize,
     skip: bool,
     threads: usize,
+    weighted: bool,
 }
 
 impl Case {
@@ -25,8 +27,9 @@ impl Case {
             Scene::Sparse => "sparse",
         };
         let skip = if self.skip { "skip" } else { "noskip" };
+        let colour = if self.weighted { "-weighted" } else { "" };
         format!(
-            "{scene}-g{}-m{}-{skip}-t{}",
+            "{scene}-g{}-m{}-{skip}-t{}{colour}",
             self.grid, self.samples, self.threads
         )
     }
@@ -45,10 +48,21 @@ fn cases() -> Vec<Case> {
                             samples,
                             skip,
                             threads,
+                            weighted: false,
                         });
                     }
                 }
             }
+        }
+        for skip in [false, true] {
+            out.push(Case {
+                scene,
+                grid: 64,
+                samples: 128,
+                skip,
+                threads: 2,
+                weighted: true,
+            });
         }
     }
     out
@@ -72,7 +86,12 @@ fn bench(c: &mut Criterion, backward: bool) {
             .with_sampler(Sampler::Uniform {
                 samples: case.samples,
             })
-            .with_skip_empty(case.skip);
+            .with_skip_empty(case.skip)
+            .with_colour_interpolation(if case.weighted {
+                ColourInterpolation::DensityWeighted
+            } else {
+                ColourInterpolation::Separate
+            });
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(case.threads)
             .build()

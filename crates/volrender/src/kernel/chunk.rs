@@ -46,6 +46,40 @@ pub(crate) struct Chunk<T> {
     /// `1 - exp(-sigma dt)` and `exp(-sigma dt)`.
     pub(crate) alpha: [T; LANES],
     pub(crate) keep: [T; LANES],
+    /// The volume's colours are premultiplied: `value` holds the colour after the division by
+    /// the density, and [`Chunk::scatter`] differentiates that division too.
+    density_weighted: bool,
+}
+
+/// Interpolated densities at or below this give a density-weighted sample colour 0 instead of a
+/// quotient of two values near underflow (such a sample's weight in the image is below 1e-30).
+const MIN_WEIGHTING_DENSITY: f64 = 1e-30;
+
+/// `[sigma, P] -> [sigma, P / sigma]`: a density-weighted sample's colour from its interpolated
+/// density and premultiplied colour.
+#[inline(always)]
+fn unpremultiply<T: Real>(v: [T; 4]) -> [T; 4] {
+    let sigma = v[0];
+    if sigma > T::of(MIN_WEIGHTING_DENSITY) {
+        [sigma, v[1] / sigma, v[2] / sigma, v[3] / sigma]
+    } else {
+        [sigma, T::zero(), T::zero(), T::zero()]
+    }
+}
+
+/// The adjoint of [`unpremultiply`] at `v = [sigma, c]` (its output): a gradient `g` with respect
+/// to `[sigma, c]` becomes `[g_sigma - sum_k g_k c_k / sigma, g_c / sigma]` with respect to
+/// `[sigma, P]` (`dc / dP = 1 / sigma`, `dc / dsigma = -c / sigma`).
+#[inline(always)]
+fn unpremultiply_adjoint<T: Real>(v: [T; 4], g: [T; 4]) -> [T; 4] {
+    let sigma = v[0];
+    if sigma > T::of(MIN_WEIGHTING_DENSITY) {
+        let gp = [g[1] / sigma, g[2] / sigma, g[3] / sigma];
+        let along_colour = gp[0] * v[1] + gp[1] * v[2] + gp[2] * v[3];
+        [g[0] - along_colour, gp[0], gp[1], gp[2]]
+    } else {
+        [g[0], T::zero(), T::zero(), T::zero()]
+    }
 }
 
 /// `a + f (b - a)` per channel.
@@ -109,6 +143,7 @@ impl<T: Real> Chunk<T> {
             sigma: zeros,
             alpha: zeros,
             keep: zeros,
+            density_weighted: false,
         }
     }
 
@@ -155,6 +190,7 @@ impl<T: Real> Chunk<T> {
         }
         self.value = [[T::zero(); 4]; LANES];
         self.sigma = [T::zero(); LANES];
+        self.density_weighted = vol.density_weighted;
         for l in 0..self.len {
             if !self.live[l] {
                 continue;
@@ -165,7 +201,12 @@ impl<T: Real> Chunk<T> {
             let row = |r: usize| lerp(vol.data[r], vol.data[r + sx], fx);
             let near = lerp(row(b), row(b + sy), fy);
             let far = lerp(row(b + sz), row(b + sz + sy), fy);
-            self.value[l] = lerp(near, far, fz);
+            let value = lerp(near, far, fz);
+            self.value[l] = if vol.density_weighted {
+                unpremultiply(value)
+            } else {
+                value
+            };
             self.sigma[l] = self.value[l][0];
         }
     }
@@ -182,6 +223,11 @@ impl<T: Real> Chunk<T> {
     /// the lerps that interpolated it.
     #[inline(always)]
     pub(crate) fn scatter(&self, l: usize, buf: &mut [[T; 4]], g: [T; 4]) {
+        let g = if self.density_weighted {
+            unpremultiply_adjoint(self.value[l], g)
+        } else {
+            g
+        };
         let b = self.base[l] as usize;
         let [sx, sy, sz] = self.step.map(|s| s[l] as usize);
         let [fx, fy, fz] = self.frac.map(|f| f[l]);
@@ -282,7 +328,11 @@ mod tests {
     fn lerps_match_the_weighted_corners() {
         let n = [3, 1, 4];
         let data = test_volume(n);
-        let vol = VolumeView { data: &data, n };
+        let vol = VolumeView {
+            data: &data,
+            n,
+            density_weighted: false,
+        };
         let points = [
             [1.3, 0.0, 0.25],
             [-0.5, 0.2, 3.5],
@@ -312,7 +362,11 @@ mod tests {
     fn scatter_is_the_adjoint_of_gather() {
         let n = [3, 2, 2];
         let data = test_volume(n);
-        let vol = VolumeView { data: &data, n };
+        let vol = VolumeView {
+            data: &data,
+            n,
+            density_weighted: false,
+        };
         let points = [[1.3, 0.0, 0.25], [2.0, 1.4, 0.5], [0.2, 0.7, 1.0]];
         let c = chunk_at(&points, &vol);
         let g = [0.5, -1.0, 2.0, 3.0];

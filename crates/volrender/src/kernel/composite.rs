@@ -181,6 +181,7 @@ mod tests {
         let vol = VolumeView {
             data: &data,
             n: [3, 3, 3],
+            density_weighted: false,
         };
         let grid = GridSpec {
             min: [-1.0; 3],
@@ -236,7 +237,11 @@ mod tests {
                 [density, (i % 3) as f32 * 0.3, 0.5, (i % 5) as f32 * 0.2]
             })
             .collect();
-        let vol = VolumeView { data: &data, n };
+        let vol = VolumeView {
+            data: &data,
+            n,
+            density_weighted: false,
+        };
         let grid = GridSpec {
             min: [-1.0; 3],
             max: [1.0; 3],

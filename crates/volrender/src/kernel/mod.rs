@@ -104,11 +104,15 @@ impl Real for f64 {
 }
 
 /// A volume as the kernels see it: interleaved `[sigma, r, g, b]` per voxel, row-major
-/// `(z, y, x)`, with `n = [w, h, d]` cells along x, y, z.
+/// `(z, y, x)`, with `n = [w, h, d]` cells along x, y, z. With `density_weighted` the colours are
+/// premultiplied, `[sigma, sigma r, sigma g, sigma b]`, and a sample's colour is its
+/// interpolated premultiplied colour divided by its interpolated density
+/// ([`crate::ColourInterpolation::DensityWeighted`]).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct VolumeView<'a, T> {
     pub(crate) data: &'a [[T; 4]],
     pub(crate) n: [usize; 3],
+    pub(crate) density_weighted: bool,
 }
 
 #[cfg(test)]

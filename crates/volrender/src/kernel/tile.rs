@@ -200,7 +200,11 @@ mod tests {
             .collect();
         for occupancy in [None, Some(occ)] {
             let kernel = |isa| RayKernel {
-                volume: VolumeView { data: &data, n },
+                volume: VolumeView {
+                    data: &data,
+                    n,
+                    density_weighted: false,
+                },
                 occupancy,
                 grid: GridSpec {
                     min: [-1.0, -1.2, -0.8],

@@ -104,6 +104,7 @@ mod tests {
         let view = VolumeView {
             data: &interleaved,
             n: [4, 3, 2],
+            density_weighted: false,
         };
         let mut expected = [0f32; 4];
         for p in [
