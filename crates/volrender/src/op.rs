@@ -416,9 +416,13 @@ fn interleave<T: Pooled>(
                 .enumerate()
                 .map(|(chunk, out)| {
                     let start = chunk * CHUNK;
+                    let planes = [0, 1, 2, 3].map(|c| {
+                        let plane = c * voxels + start;
+                        &vol[plane..plane + out.len()]
+                    });
                     let mut count = 0;
                     for (i, cell) in out.iter_mut().enumerate() {
-                        let v = voxel(start + i);
+                        let v = planes.map(|p| p[i]);
                         count += usize::from(refused(&v).is_some());
                         *cell = premultiply(v);
                     }

@@ -51,12 +51,28 @@ pub(crate) fn forward_ray<T: Real>(
     g: &RayGeom<T>,
     p: &Params<T>,
 ) -> RayOut<T> {
+    // The colour rule is chosen once per ray (see `Chunk::gather`).
+    if vol.density_weighted {
+        forward_ray_with::<T, true>(vol, occ, g, p)
+    } else {
+        forward_ray_with::<T, false>(vol, occ, g, p)
+    }
+}
+
+/// [`forward_ray`] for one colour rule (`WEIGHTED`: density-weighted).
+#[inline(always)]
+fn forward_ray_with<T: Real, const WEIGHTED: bool>(
+    vol: &VolumeView<'_, T>,
+    occ: Option<&OccView<'_>>,
+    g: &RayGeom<T>,
+    p: &Params<T>,
+) -> RayOut<T> {
     let mut trans = T::one();
     let mut rgb = [T::zero(); 3];
     let (mut depth, mut opacity) = (T::zero(), T::zero());
     let (mut first_live, mut end_live) = (None, 0);
     let mut chunks = Chunks::new(vol, occ, g, 0);
-    'ray: while let Some(c) = chunks.next_chunk() {
+    'ray: while let Some(c) = chunks.next_chunk::<WEIGHTED>() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
@@ -104,6 +120,25 @@ pub(crate) fn backward_ray<T: Real>(
     grad: [T; 5],
     buf: &mut [[T; 4]],
 ) {
+    // The colour rule is chosen once per ray (see `Chunk::gather`).
+    if vol.density_weighted {
+        backward_ray_with::<T, true>(vol, occ, g, p, out, grad, buf);
+    } else {
+        backward_ray_with::<T, false>(vol, occ, g, p, out, grad, buf);
+    }
+}
+
+/// [`backward_ray`] for one colour rule (`WEIGHTED`: density-weighted).
+#[inline(always)]
+fn backward_ray_with<T: Real, const WEIGHTED: bool>(
+    vol: &VolumeView<'_, T>,
+    occ: Option<&OccView<'_>>,
+    g: &RayGeom<T>,
+    p: &Params<T>,
+    out: &RayOut<T>,
+    grad: [T; 5],
+    buf: &mut [[T; 4]],
+) {
     let [gr, gg, gb, gd, ga] = grad;
     let total = gr * out.rgb[0] + gg * out.rgb[1] + gb * out.rgb[2] + gd * out.depth;
     let opacity_term = ga * out.trans;
@@ -114,7 +149,7 @@ pub(crate) fn backward_ray<T: Real>(
     let (from, to) = out.live;
     let g = &RayGeom { n: to, ..*g };
     let mut chunks = Chunks::new(vol, occ, g, from);
-    'ray: while let Some(c) = chunks.next_chunk() {
+    'ray: while let Some(c) = chunks.next_chunk::<WEIGHTED>() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
@@ -125,7 +160,7 @@ pub(crate) fn backward_ray<T: Real>(
             let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * c.t[l];
             upto = upto + w * x;
             let d_tau = next * x - (total - upto) + opacity_term;
-            c.scatter(l, buf, [d_tau * g.dt, w * gr, w * gg, w * gb]);
+            c.scatter::<WEIGHTED>(l, buf, [d_tau * g.dt, w * gr, w * gg, w * gb]);
             trans = next;
             if trans <= p.epsilon {
                 break 'ray;
