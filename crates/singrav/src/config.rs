@@ -185,13 +185,6 @@ pub struct TrainConfig {
     /// (the paper's renderer, and runs made before it existed): colour interpolated on its own.
     #[serde(default)]
     pub density_weighted_colour: bool,
-    /// Early ray termination of training's renders ([`volrender::RenderConfig::epsilon`]): a ray
-    /// stops once its transmittance is at most this, so the samples behind opaque ground and
-    /// stones are neither rendered nor differentiated; colour and opacity change by at most
-    /// this much. 0 (exact; runs made before it existed) renders every sample. The metrics of
-    /// `volgen eval` always render exactly.
-    #[serde(default)]
-    pub render_epsilon: f32,
     /// Ablation switch: the SWD loss at the last scale.
     pub use_swd: bool,
     /// The features the SWD loss compares. Recorded so that a resumed run cannot switch them;
@@ -524,7 +517,6 @@ impl TrainConfig {
             density_shift: -4.0,
             background: [1.0, 1.0, 1.0],
             density_weighted_colour: false,
-            render_epsilon: 0.0,
             use_swd: true,
             swd_features: SwdFeatures::PatchPyramid,
             use_csg: true,
@@ -833,15 +825,6 @@ impl TrainConfig {
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;
         }
-        if !(0.0..1.0).contains(&self.render_epsilon) {
-            return Err(invalid(
-                "render_epsilon",
-                format!(
-                    "expected a transmittance in [0, 1), got {}",
-                    self.render_epsilon
-                ),
-            ));
-        }
         // The terms on the samples' rendered opacity read it from the critics' views.
         for (field, weight) in [
             ("lambda_height_profile", self.lambda_height_profile),
@@ -1089,7 +1072,6 @@ mod tests {
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
             "density_weighted_colour",
-            "render_epsilon",
             "sparse_from_scale",
             "sparse_threshold",
             "sparse_margin",
@@ -1108,7 +1090,6 @@ mod tests {
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);
         assert!(!old.density_weighted_colour);
-        assert_eq!(old.render_epsilon, 0.0);
         assert_eq!(old.sparse_from_scale, None);
         assert!(!old.sparse_shell);
         assert_eq!(old.views(1), ScaleViews::same(old.views_per_step));
@@ -1145,8 +1126,6 @@ mod tests {
             assert!(err.contains("sparse_threshold"), "{err}");
         }
         refused("reconstruction_noise_lr", "-0.01");
-        refused("render_epsilon", "-0.001");
-        refused("render_epsilon", "1");
         // micro has two 3D scales.
         refused("opacity_binary_until_scale", "0");
         refused("opacity_binary_until_scale", "3");

@@ -18,15 +18,14 @@ pub struct ViewRenderer {
 
 impl ViewRenderer {
     /// The renderer of training runs with `config`: `samples` uniform samples per ray, the
-    /// configured background, colour interpolation and early termination, and depth divided by `depth_norm` (so it is about 1 at the far
-    /// side of the box) when `with_depth`.
+    /// configured background and colour interpolation, and depth divided by `depth_norm` (so
+    /// it is about 1 at the far side of the box) when `with_depth`.
     pub fn new(config: &TrainConfig, samples: usize, depth_norm: f32, with_depth: bool) -> Self {
         let render = RenderConfig::default()
             .with_sampler(Sampler::Uniform { samples })
             .with_background(config.background)
             .with_depth(with_depth)
-            .with_colour_interpolation(config.colour_interpolation())
-            .with_epsilon(config.render_epsilon);
+            .with_colour_interpolation(config.colour_interpolation());
         Self {
             activation: config.activation(),
             config: render,
@@ -54,16 +53,10 @@ impl ViewRenderer {
     }
 
     /// Renders `raw` from every camera with colour `(V, 3, h, w)`, depth `(V, 1, h, w)` (divided
-    /// by the depth normaliser) and opacity `(V, 1, h, w)`, whatever `with_depth` said, and
-    /// without early termination: what the metrics compare with a dataset's images, depth maps
-    /// and alpha.
+    /// by the depth normaliser) and opacity `(V, 1, h, w)`, whatever `with_depth` said: what the
+    /// metrics compare with a dataset's images, depth maps and alpha.
     pub fn render_maps(&self, raw: &Tensor, cameras: &[&Camera]) -> Result<ViewMaps> {
-        // Exact whatever the training's early termination, so metrics compare across runs.
-        let config = self
-            .config
-            .with_depth(true)
-            .with_opacity(true)
-            .with_epsilon(0.0);
+        let config = self.config.with_depth(true).with_opacity(true);
         let maps = self.render_with(raw, cameras, config)?;
         let missing = || invalid("renderer", "returned no depth or opacity");
         Ok(ViewMaps {
@@ -161,61 +154,4 @@ pub struct OptionalMaps {
     pub depth: Option<Tensor>,
     /// Opacity `(V, 1, h, w)`, when rendered.
     pub opacity: Option<Tensor>,
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::sample::showcase_cameras;
-
-    /// A raw volume whose lower half is dense (rays stop in it) under thin fog, with colours
-    /// that vary per voxel.
-    fn ground_under_fog(size: usize) -> Tensor {
-        let voxels = size * size * size;
-        let mut raw = Vec::with_capacity(4 * voxels);
-        raw.extend((0..voxels).map(|i| if i < voxels / 2 { 6.0 } else { -2.0 }));
-        raw.extend((0..3 * voxels).map(|i| ((i * 37) % 11) as f32 / 5.0 - 1.0));
-        Tensor::from_vec(raw, (1, 4, size, size, size), &Device::Cpu).unwrap()
-    }
-
-    fn values(t: &Tensor) -> Vec<f32> {
-        t.flatten_all().unwrap().to_vec1().unwrap()
-    }
-
-    /// Training's renders stop rays at the configured transmittance, within that much of the
-    /// exact colour and opacity; the metrics' maps stay exact.
-    #[test]
-    fn early_termination_is_bounded_and_the_metrics_render_exactly() {
-        let exact_config = TrainConfig::preset("micro").unwrap();
-        let early_config = TrainConfig {
-            render_epsilon: 0.01,
-            ..exact_config.clone()
-        };
-        let raw = ground_under_fog(8);
-        let cameras = showcase_cameras(2, 12).unwrap();
-        let cameras: Vec<&Camera> = cameras.iter().collect();
-        let renderer = |config: &TrainConfig| ViewRenderer::new(config, 32, 1.0, true);
-        let exact = renderer(&exact_config).render_maps(&raw, &cameras).unwrap();
-        let early_renderer = renderer(&early_config).with_opacity(true);
-        let early = early_renderer.render_all(&raw, &cameras).unwrap();
-        let mut largest = 0f32;
-        for (a, b) in [
-            (&exact.rgb, &early.rgb),
-            (&exact.opacity, early.opacity.as_ref().unwrap()),
-        ] {
-            for (x, y) in values(a).iter().zip(values(b)) {
-                largest = largest.max((x - y).abs());
-            }
-        }
-        assert!(largest > 0.0, "no ray stopped early");
-        assert!(largest <= 0.01 + 1e-6, "changed by {largest}");
-        let metrics = early_renderer.render_maps(&raw, &cameras).unwrap();
-        for (a, b) in [
-            (&exact.rgb, &metrics.rgb),
-            (&exact.depth, &metrics.depth),
-            (&exact.opacity, &metrics.opacity),
-        ] {
-            assert_eq!(values(a), values(b));
-        }
-    }
 }
