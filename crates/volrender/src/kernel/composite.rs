@@ -43,25 +43,11 @@ pub(crate) struct RayOut<T> {
     pub(crate) live: (usize, usize),
 }
 
-/// Renders one ray.
+/// Renders one ray; `WEIGHTED`: the volume's colours are density-weighted
+/// ([`VolumeView::density_weighted`]), a constant so that each rule's loops compile on their own
+/// (see `Chunk::gather`).
 #[inline(always)]
-pub(crate) fn forward_ray<T: Real>(
-    vol: &VolumeView<'_, T>,
-    occ: Option<&OccView<'_>>,
-    g: &RayGeom<T>,
-    p: &Params<T>,
-) -> RayOut<T> {
-    // The colour rule is chosen once per ray (see `Chunk::gather`).
-    if vol.density_weighted {
-        forward_ray_with::<T, true>(vol, occ, g, p)
-    } else {
-        forward_ray_with::<T, false>(vol, occ, g, p)
-    }
-}
-
-/// [`forward_ray`] for one colour rule (`WEIGHTED`: density-weighted).
-#[inline(always)]
-fn forward_ray_with<T: Real, const WEIGHTED: bool>(
+pub(crate) fn forward_ray<T: Real, const WEIGHTED: bool>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
     g: &RayGeom<T>,
@@ -109,28 +95,10 @@ fn forward_ray_with<T: Real, const WEIGHTED: bool>(
 }
 
 /// Adds one ray's gradient with respect to the voxels to `buf`, given the forward's output
-/// `out` and the output gradient `[d_r, d_g, d_b, d_depth, d_opacity]`.
+/// `out` and the output gradient `[d_r, d_g, d_b, d_depth, d_opacity]`; `WEIGHTED` as in
+/// [`forward_ray`].
 #[inline(always)]
-pub(crate) fn backward_ray<T: Real>(
-    vol: &VolumeView<'_, T>,
-    occ: Option<&OccView<'_>>,
-    g: &RayGeom<T>,
-    p: &Params<T>,
-    out: &RayOut<T>,
-    grad: [T; 5],
-    buf: &mut [[T; 4]],
-) {
-    // The colour rule is chosen once per ray (see `Chunk::gather`).
-    if vol.density_weighted {
-        backward_ray_with::<T, true>(vol, occ, g, p, out, grad, buf);
-    } else {
-        backward_ray_with::<T, false>(vol, occ, g, p, out, grad, buf);
-    }
-}
-
-/// [`backward_ray`] for one colour rule (`WEIGHTED`: density-weighted).
-#[inline(always)]
-fn backward_ray_with<T: Real, const WEIGHTED: bool>(
+pub(crate) fn backward_ray<T: Real, const WEIGHTED: bool>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
     g: &RayGeom<T>,
@@ -243,7 +211,7 @@ mod tests {
             live: (0, 0),
         };
         for n in 1..=full.n {
-            let out = forward_ray(&vol, None, &RayGeom { n, ..full }, &p);
+            let out = forward_ray::<_, false>(&vol, None, &RayGeom { n, ..full }, &p);
             assert!(
                 out.trans <= last.trans && out.opacity >= last.opacity,
                 "sample {n}"
@@ -307,11 +275,19 @@ mod tests {
                 };
                 for (origin, dir) in rays {
                     let g = setup_ray(origin, dir, &grid, Sampler::Uniform { samples: 29 });
-                    let out = forward_ray(&vol, occ, &g, &p);
+                    let out = forward_ray::<_, false>(&vol, occ, &g, &p);
                     let backward = |live| {
                         let mut buf = vec![[0f32; 4]; voxels];
                         let grad = [0.3, -1.0, 0.7, 0.25, -0.5];
-                        backward_ray(&vol, occ, &g, &p, &RayOut { live, ..out }, grad, &mut buf);
+                        backward_ray::<_, false>(
+                            &vol,
+                            occ,
+                            &g,
+                            &p,
+                            &RayOut { live, ..out },
+                            grad,
+                            &mut buf,
+                        );
                         buf.as_flattened()
                             .iter()
                             .map(|v| v.to_bits())
