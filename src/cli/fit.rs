@@ -194,11 +194,9 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
         },
         use_depth: !args.no_depth,
         seed: args.seed,
-        colour_interpolation: if args.density_weighted_colour {
-            volrender::ColourInterpolation::DensityWeighted
-        } else {
-            volrender::ColourInterpolation::Separate
-        },
+        colour_interpolation: volrender::ColourInterpolation::density_weighted_if(
+            args.density_weighted_colour,
+        ),
         ..defaults
     };
     config.validate()?;

@@ -806,11 +806,7 @@ impl TrainConfig {
 
     /// The renderer's colour rule for [`TrainConfig::density_weighted_colour`].
     pub fn colour_interpolation(&self) -> volrender::ColourInterpolation {
-        if self.density_weighted_colour {
-            volrender::ColourInterpolation::DensityWeighted
-        } else {
-            volrender::ColourInterpolation::Separate
-        }
+        volrender::ColourInterpolation::density_weighted_if(self.density_weighted_colour)
     }
 
     /// Checks that the sizes agree and every setting is in range.

@@ -87,6 +87,30 @@ pub enum ColourInterpolation {
     DensityWeighted,
 }
 
+impl ColourInterpolation {
+    /// The rule a yes/no switch names: `DensityWeighted` for `true`, `Separate` for `false`.
+    ///
+    /// ```
+    /// use volrender::ColourInterpolation;
+    /// assert_eq!(ColourInterpolation::density_weighted_if(true), ColourInterpolation::DensityWeighted);
+    /// assert!(!ColourInterpolation::density_weighted_if(false).is_density_weighted());
+    /// ```
+    #[must_use]
+    pub fn density_weighted_if(switch: bool) -> Self {
+        if switch {
+            Self::DensityWeighted
+        } else {
+            Self::Separate
+        }
+    }
+
+    /// Whether this is [`ColourInterpolation::DensityWeighted`].
+    #[must_use]
+    pub fn is_density_weighted(self) -> bool {
+        self == Self::DensityWeighted
+    }
+}
+
 /// Options of [`render`](crate::render).
 ///
 /// ```

@@ -18,9 +18,7 @@ use radiance_volume::GridDims;
 use rayon::prelude::*;
 
 use crate::buffer_pool::{self, Pooled};
-use crate::config::{
-    ColourInterpolation, RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE,
-};
+use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE};
 use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
 use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
@@ -221,7 +219,7 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             .contiguous_offsets()
             .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
         let values = &T::cpu_storage_as_slice(cpu)?[start..end];
-        let density_weighted = cfg.colour_interpolation == ColourInterpolation::DensityWeighted;
+        let density_weighted = cfg.colour_interpolation.is_density_weighted();
         let volumes = interleave(values, rays.len(), channels, dims, density_weighted)?;
         let voxels = dims.voxel_count();
         let empty_blocks = occupancy
@@ -251,18 +249,13 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
         })
     }
 
-    /// Whether the kernels read premultiplied colours.
-    fn density_weighted(&self) -> bool {
-        self.cfg.colour_interpolation == ColourInterpolation::DensityWeighted
-    }
-
     /// The kernel for volume `b`.
     fn kernel(&self, b: usize) -> RayKernel<'_, T> {
         RayKernel {
             volume: VolumeView {
                 data: &self.volumes[b],
                 n: self.grid.n,
-                density_weighted: self.density_weighted(),
+                density_weighted: self.cfg.colour_interpolation.is_density_weighted(),
             },
             occupancy: self.occupancy.get(b).map(|o| OccView {
                 distance: &o.distance,
@@ -506,7 +499,7 @@ impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
     ) -> candle_core::Result<Option<Tensor>> {
         let res: Vec<T> = res.flatten_all()?.to_vec1()?;
         let grad: Vec<T> = grad_res.flatten_all()?.to_vec1()?;
-        let values: Option<Vec<T>> = if self.density_weighted() {
+        let values: Option<Vec<T>> = if self.cfg.colour_interpolation.is_density_weighted() {
             Some(arg.flatten_all()?.to_vec1()?)
         } else {
             None

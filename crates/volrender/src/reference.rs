@@ -10,15 +10,16 @@
 use candle_core::{Device, Tensor};
 use radiance_volume::GridDims;
 
-use crate::config::{ColourInterpolation, RenderConfig, Sampler};
+use crate::config::{RenderConfig, Sampler};
 use crate::error::{invalid, Result};
 use crate::kernel::{corners, setup_ray};
 use crate::op::{grid_spec, RenderOutput};
 use crate::rays::Rays;
 
 /// Renders `(C, D, H, W)` along `rays` with candle ops; supports the `Uniform` and `UniformLeft`
-/// samplers, both colour interpolations, the background and both extra outputs (always returned), but neither early
-/// termination nor skipping (they do not change its result when `epsilon` is 0).
+/// samplers, both colour interpolations, the background and both extra outputs (always
+/// returned), but neither early termination nor skipping (they do not change its result when
+/// `epsilon` is 0).
 ///
 /// ```
 /// use candle_core::{Device, Tensor, DType};
@@ -83,7 +84,7 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
     let dt = Tensor::from_vec(dts, (r, 1), dev)?.to_dtype(dtype)?;
 
     let mut flat = volume.narrow(0, 0, 4)?.reshape((4, dims.voxel_count()))?;
-    let density_weighted = cfg.colour_interpolation == ColourInterpolation::DensityWeighted;
+    let density_weighted = cfg.colour_interpolation.is_density_weighted();
     if density_weighted {
         let sigma = flat.narrow(0, 0, 1)?;
         let premultiplied = flat.narrow(0, 1, 3)?.broadcast_mul(&sigma)?;

@@ -58,14 +58,6 @@ fn check_fd(vol: &Tensor, f: impl Fn(&Tensor) -> f64, analytic: &[f64]) {
     }
 }
 
-fn interpolation(density_weighted: bool) -> ColourInterpolation {
-    if density_weighted {
-        ColourInterpolation::DensityWeighted
-    } else {
-        ColourInterpolation::Separate
-    }
-}
-
 fn sampler(kind: u8, n: usize) -> Sampler {
     match kind {
         0 => Sampler::Uniform { samples: n },
@@ -91,7 +83,7 @@ proptest! {
             .with_sampler(sampler(kind, samples))
             .with_depth(true)
             .with_opacity(true)
-            .with_colour_interpolation(interpolation(weighted));
+            .with_colour_interpolation(ColourInterpolation::density_weighted_if(weighted));
         if background {
             cfg = cfg.with_background([0.3, 0.9, 0.1]);
         }
@@ -129,7 +121,7 @@ proptest! {
         let rays = mixed_rays(&mut r, 4);
         let s = if left { Sampler::UniformLeft { samples } } else { Sampler::Uniform { samples } };
         let cfg = RenderConfig::default().with_sampler(s).with_depth(true).with_opacity(true).with_background([1.0, 0.5, 0.0])
-            .with_colour_interpolation(interpolation(weighted));
+            .with_colour_interpolation(ColourInterpolation::density_weighted_if(weighted));
         let weights = loss_weights(rays.len(), seed);
         let var = Var::from_tensor(&vol).unwrap();
         let fast = render(var.as_tensor(), &rays, &cfg).unwrap();

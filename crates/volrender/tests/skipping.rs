@@ -29,7 +29,7 @@ proptest! {
         let sampler = if per_voxel { Sampler::PerVoxel { per_voxel: 2 } } else { Sampler::Uniform { samples: 37 } };
         let base = RenderConfig { occupancy_cell: cell, ..RenderConfig::default() }
             .with_sampler(sampler).with_epsilon(epsilon).with_depth(true).with_opacity(true).with_background([0.1, 0.2, 0.3])
-            .with_colour_interpolation(if weighted { ColourInterpolation::DensityWeighted } else { ColourInterpolation::Separate });
+            .with_colour_interpolation(ColourInterpolation::density_weighted_if(weighted));
         let run = |skip: bool| {
             let var = Var::from_tensor(&vol).unwrap();
             let out = render(var.as_tensor(), &rays, &base.with_skip_empty(skip)).unwrap();

@@ -87,11 +87,7 @@ fn bench(c: &mut Criterion, backward: bool) {
                 samples: case.samples,
             })
             .with_skip_empty(case.skip)
-            .with_colour_interpolation(if case.weighted {
-                ColourInterpolation::DensityWeighted
-            } else {
-                ColourInterpolation::Separate
-            });
+            .with_colour_interpolation(ColourInterpolation::density_weighted_if(case.weighted));
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(case.threads)
             .build()
