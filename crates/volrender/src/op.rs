@@ -393,11 +393,12 @@ fn interleave<T: Pooled>(
             v
         }
     };
-    // The first channel whose value is refused (`4`: the premultiplied colour overflows).
-    let refused = |v: &[T; 4]| {
-        (0..4).find(|&c| !value_ok(c, v[c])).or_else(|| {
-            (density_weighted && !premultiply(*v).iter().all(|x| x.is_finite())).then_some(4)
-        })
+    // The first channel refused in voxel `v`, whose kernel values are `kept` (`4`: the
+    // premultiplied colour overflows).
+    let refused = |v: &[T; 4], kept: &[T; 4]| {
+        (0..4)
+            .find(|&c| !value_ok(c, v[c]))
+            .or_else(|| (density_weighted && !kept.iter().all(|x| x.is_finite())).then_some(4))
     };
     (0..n)
         .map(|b| {
@@ -416,8 +417,8 @@ fn interleave<T: Pooled>(
                     let mut count = 0;
                     for (i, cell) in out.iter_mut().enumerate() {
                         let v = planes.map(|p| p[i]);
-                        count += usize::from(refused(&v).is_some());
                         *cell = premultiply(v);
+                        count += usize::from(refused(&v, cell).is_some());
                     }
                     count
                 })
@@ -425,7 +426,7 @@ fn interleave<T: Pooled>(
             if count > 0 {
                 // (The buffer is not given back: errors are not the path to optimise.)
                 let (i, c) = (0..voxels)
-                    .find_map(|i| refused(&voxel(i)).map(|c| (i, c)))
+                    .find_map(|i| refused(&voxel(i), &premultiply(voxel(i))).map(|c| (i, c)))
                     .unwrap_or((0, 0));
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
                 let first = if c < 4 {
