@@ -47,11 +47,12 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 14] = [
+const LOSS_COLUMNS: [(&str, &str); 15] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
     ("opacity", "opacity"),
     ("colour_distribution", "colour distribution"),
+    ("chroma_distribution", "chroma distribution"),
     ("height_profile", "height profile"),
     ("opacity_binary", "binary opacity"),
     ("opacity_distribution", "opacity distribution"),

@@ -453,6 +453,7 @@ fn format_losses(l: &StepLosses) -> String {
         ("fit", l.fitted),
         ("opacity", l.opacity),
         ("colour", l.colour_distribution),
+        ("chroma", l.chroma_distribution),
         ("height", l.height_profile),
         ("binary", l.opacity_binary),
         ("alpha-dist", l.opacity_distribution),

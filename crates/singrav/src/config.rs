@@ -119,6 +119,12 @@ pub struct TrainConfig {
     /// view from the same camera. 0 (runs made before it existed) leaves it out.
     #[serde(default)]
     pub lambda_colour: f64,
+    /// Weight of the chroma-distribution loss of generated scenes at the 3D scales: as
+    /// [`TrainConfig::lambda_colour`]'s term, on the pixels' chroma (RGB projected onto the
+    /// plane orthogonal to grey), so a tint is matched against the real view's tints and not
+    /// hidden among its brightnesses. 0 (runs made before it existed) leaves it out.
+    #[serde(default)]
+    pub lambda_chroma: f64,
     /// The first 3D scale (2 or more, counted from 1) whose generator changes the volume only in
     /// the active set: near matter of the upsampled coarser volume (see [`crate::active_set`]).
     /// `None` (the paper's model, `--dense`, the `micro` preset, and runs made before it
@@ -502,6 +508,7 @@ impl TrainConfig {
             lambda_opacity: LAMBDA_OPACITY,
             critic_opacity: true,
             lambda_colour: LAMBDA_COLOUR,
+            lambda_chroma: 0.0,
             lambda_height_profile: 0.0,
             lambda_opacity_binary: 0.0,
             opacity_binary_until_scale: None,
@@ -968,6 +975,7 @@ impl TrainConfig {
             self.lambda_swd,
             self.lambda_opacity,
             self.lambda_colour,
+            self.lambda_chroma,
             self.noise_amp_factor,
             self.noise_amp_first,
         ];
@@ -1061,6 +1069,7 @@ mod tests {
             "lambda_opacity",
             "critic_opacity",
             "lambda_colour",
+            "lambda_chroma",
             "scale_views",
             "lambda_height_profile",
             "reconstruction_noise_lr",
@@ -1079,6 +1088,7 @@ mod tests {
         assert_eq!(old.lambda_opacity, 0.0);
         assert!(!old.critic_opacity);
         assert_eq!(old.lambda_colour, 0.0);
+        assert_eq!(old.lambda_chroma, 0.0);
         assert_eq!(old.scale_views, None);
         assert_eq!(old.lambda_height_profile, 0.0);
         assert_eq!(old.reconstruction_noise_lr, 0.0);

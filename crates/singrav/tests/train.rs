@@ -146,6 +146,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let data = dataset(&tmp.path().join("data"));
     // Every optional term and the active set on, so that each runs once.
     let mut config = micro();
+    config.lambda_chroma = 1.0;
     config.lambda_height_profile = 1.0;
     config.lambda_opacity_binary = 1.0;
     config.lambda_opacity_distribution = 1.0;
@@ -164,6 +165,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             l.swd,
             l.opacity,
             l.colour_distribution,
+            l.chroma_distribution,
             l.height_profile,
             l.opacity_binary,
             l.opacity_distribution,
@@ -183,7 +185,12 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             *scale < config.scales() && l.adversarial.is_some() && config.lambda_colour > 0.0;
         assert_eq!(l.colour_distribution.is_some(), compared, "scale {scale}");
         let on_samples = *scale < config.scales() && l.adversarial.is_some();
-        for term in [l.height_profile, l.opacity_binary, l.opacity_distribution] {
+        for term in [
+            l.chroma_distribution,
+            l.height_profile,
+            l.opacity_binary,
+            l.opacity_distribution,
+        ] {
             assert_eq!(term.is_some(), on_samples, "scale {scale}: {l:?}");
         }
     }

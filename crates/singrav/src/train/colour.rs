@@ -6,6 +6,12 @@
 //! compares the two views' pixel colours as point sets in RGB, by the sliced Wasserstein
 //! distance (squared W2 along random directions), which is indifferent to where the colours
 //! are, so it constrains colours, not the layout a sample may vary.
+//!
+//! In RGB a pixel's brightness spreads far more than its tint (white sky, dark stones), so a
+//! random direction mostly sorts the pixels by brightness and a tint of a few stones costs
+//! little. The chroma-distribution loss takes the same distance in the plane orthogonal to grey,
+//! where the pixels are matched by their tints alone: a purple stone against the real view's
+//! grey ones, whatever its brightness.
 
 use candle_core::Tensor;
 use swd_loss::{sliced_wasserstein, Metric, Projections};
@@ -25,6 +31,30 @@ pub(super) fn colour_distribution_loss(
     pixel_distribution_distance(generated, real, || {
         Ok(Projections::random(3, DIRECTIONS, rng, generated.device())?)
     })
+}
+
+/// The mean over views of the squared sliced W2 distance between the pixel chroma of
+/// `generated` and `real` (both `(V, 3, h, w)` RGB), along directions in the chroma plane drawn
+/// from `rng`.
+pub(super) fn chroma_distribution_loss(
+    generated: &Tensor,
+    real: &Tensor,
+    rng: &mut impl rand::Rng,
+) -> Result<Tensor> {
+    pixel_distribution_distance(&chroma(generated)?, &chroma(real)?, || {
+        Ok(Projections::random(2, DIRECTIONS, rng, generated.device())?)
+    })
+}
+
+/// The chroma `(V, 2, h, w)` of RGB images `(V, 3, h, w)`: their coordinates along the
+/// orthonormal basis `(1, -1, 0) / sqrt 2`, `(1, 1, -2) / sqrt 6` of the plane orthogonal to grey
+/// `(1, 1, 1)`, so adding a grey to every channel changes nothing and lengths are RGB lengths.
+fn chroma(images: &Tensor) -> Result<Tensor> {
+    let channel = |c: usize| images.narrow(1, c, 1);
+    let (r, g, b) = (channel(0)?, channel(1)?, channel(2)?);
+    let red_green = ((&r - &g)? * std::f64::consts::FRAC_1_SQRT_2)?;
+    let yellow_blue = (((&r + &g)? - (&b * 2.0)?)? * (1.0 / 6f64.sqrt()))?;
+    Ok(Tensor::cat(&[red_green, yellow_blue], 1)?)
 }
 
 /// The mean over views of the squared sliced W2 distance between the pixels of `generated`
@@ -57,7 +87,7 @@ mod tests {
     use candle_core::{Device, Tensor};
     use rand::SeedableRng;
 
-    use super::colour_distribution_loss;
+    use super::{chroma_distribution_loss, colour_distribution_loss};
 
     #[test]
     fn a_constant_shift_costs_its_squared_length_projected_and_a_permutation_nothing() {
@@ -91,6 +121,51 @@ mod tests {
         expected /= 2.0 * super::DIRECTIONS as f64;
         assert!(
             (f64::from(loss) - expected).abs() < 1e-5,
+            "{loss} against {expected}"
+        );
+    }
+
+    #[test]
+    fn chroma_ignores_grey_and_a_tint_costs_its_chroma_length_projected() {
+        let real = Tensor::rand(0f32, 1f32, (2, 3, 4, 5), &Device::Cpu).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        // A grey added to every channel is brightness only.
+        let brighter = (&real + 0.2).unwrap();
+        let loss = chroma_distribution_loss(&brighter, &real, &mut rng).unwrap();
+        assert!(loss.to_scalar::<f32>().unwrap().abs() < 1e-10);
+        // A tint t = (0.1, 0, 0.1): chroma coordinates (0.1 / sqrt 2, -0.1 / sqrt 6) (hand
+        // projected on the basis), so each direction u costs (c . u)^2.
+        let tint = Tensor::new(&[0.1f32, 0.0, 0.1], &Device::Cpu)
+            .unwrap()
+            .reshape((1, 3, 1, 1))
+            .unwrap();
+        let tinted = real.broadcast_add(&tint).unwrap();
+        let mut seeded = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let loss = chroma_distribution_loss(&tinted, &real, &mut seeded)
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        let c = [0.1 / 2f64.sqrt(), -0.1 / 6f64.sqrt()];
+        let mut again = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let mut expected = 0.0f64;
+        for _ in 0..2 {
+            let p = swd_loss::Projections::random(2, super::DIRECTIONS, &mut again, &Device::Cpu)
+                .unwrap();
+            let u: Vec<Vec<f64>> = p
+                .as_tensor()
+                .to_dtype(candle_core::DType::F64)
+                .unwrap()
+                .to_vec2()
+                .unwrap();
+            for (u0, u1) in u[0].iter().zip(&u[1]) {
+                let along = c[0] * u0 + c[1] * u1;
+                expected += along * along;
+            }
+        }
+        expected /= 2.0 * super::DIRECTIONS as f64;
+        assert!(expected > 1e-3);
+        assert!(
+            (f64::from(loss) - expected).abs() < 1e-5 * (1.0 + expected),
             "{loss} against {expected}"
         );
     }

@@ -99,6 +99,9 @@ pub struct StepLosses {
     /// Weighted colour-distribution loss of the generated scenes (3D scales' adversarial
     /// iterations of runs with `lambda_colour > 0`).
     pub colour_distribution: Option<f32>,
+    /// Weighted chroma-distribution loss of the generated scenes (3D scales' adversarial
+    /// iterations of runs with `lambda_chroma > 0`).
+    pub chroma_distribution: Option<f32>,
     /// Weighted height-profile loss of the generated scenes (3D scales' adversarial iterations
     /// of runs with `lambda_height_profile > 0`).
     pub height_profile: Option<f32>,

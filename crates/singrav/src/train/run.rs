@@ -405,6 +405,7 @@ fn check_finite(losses: &StepLosses, scale: usize, step: usize) -> Result<()> {
         ("fitted-volume comparison", losses.fitted),
         ("opacity reconstruction", losses.opacity),
         ("colour distribution", losses.colour_distribution),
+        ("chroma distribution", losses.chroma_distribution),
         ("height profile", losses.height_profile),
         ("binary-opacity prior", losses.opacity_binary),
         ("opacity distribution", losses.opacity_distribution),

@@ -8,7 +8,7 @@ use candle_core::{Tensor, D};
 use radiance_volume::RadianceVolume;
 use rand::Rng;
 
-use super::colour::colour_distribution_loss;
+use super::colour::{chroma_distribution_loss, colour_distribution_loss};
 use super::concurrent::CoarserGenerator;
 use super::critic::{Critic, VolumeCritic};
 use super::fitted::FittedTarget;
@@ -282,7 +282,7 @@ impl Stage for VolumeScale<'_> {
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
         let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
-        let mut volume_adversarial_sum = 0.0;
+        let (mut volume_adversarial_sum, mut chroma_sum) = (0.0, 0.0);
         // The terms on the samples' rendered opacity, each with its weight at this scale.
         let opacity_terms: [(f64, OpacityLoss); 3] = [
             (self.config.lambda_height_profile, height_profile_loss),
@@ -325,6 +325,13 @@ impl Stage for VolumeScale<'_> {
                     let loss = (colour_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
                         * self.config.lambda_colour)?;
                     colour_sum_generated += loss.to_scalar::<f32>()?;
+                    total = (total + loss)?;
+                }
+                if self.config.lambda_chroma > 0.0 {
+                    let real = select(&self.level.images, &fake_views)?;
+                    let loss = (chroma_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
+                        * self.config.lambda_chroma)?;
+                    chroma_sum += loss.to_scalar::<f32>()?;
                     total = (total + loss)?;
                 }
                 if opacity_terms.iter().any(|(weight, ..)| *weight > 0.0) {
@@ -393,6 +400,8 @@ impl Stage for VolumeScale<'_> {
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
         losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
             .then_some(colour_sum_generated / steps);
+        losses.chroma_distribution =
+            (adversarial && self.config.lambda_chroma > 0.0).then_some(chroma_sum / steps);
         let reported = |term: usize| {
             (adversarial && opacity_terms[term].0 > 0.0).then_some(opacity_sums[term] / steps)
         };
