@@ -26,7 +26,7 @@ const DIRECTIONS: usize = 16;
 pub(super) fn colour_distribution_loss(
     generated: &Tensor,
     real: &Tensor,
-    rng: &mut impl rand::Rng,
+    rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Result<Tensor> {
     pixel_distribution_distance(generated, real, || {
         Ok(Projections::random(3, DIRECTIONS, rng, generated.device())?)
@@ -39,7 +39,7 @@ pub(super) fn colour_distribution_loss(
 pub(super) fn chroma_distribution_loss(
     generated: &Tensor,
     real: &Tensor,
-    rng: &mut impl rand::Rng,
+    rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Result<Tensor> {
     pixel_distribution_distance(&chroma(generated)?, &chroma(real)?, || {
         Ok(Projections::random(2, DIRECTIONS, rng, generated.device())?)

@@ -26,6 +26,10 @@ use crate::render::ViewRenderer;
 /// A loss on the samples' rendered opacity against the real views' alpha (both `(V, 1, h, w)`).
 type OpacityLoss = fn(&Tensor, &Tensor) -> Result<Tensor>;
 
+/// A loss on the samples' rendered colours against the real views' (both `(V, 3, h, w)`), with
+/// random directions drawn from the generator.
+type ColourLoss = fn(&Tensor, &Tensor, &mut rand_chacha::ChaCha8Rng) -> Result<Tensor>;
+
 /// One iteration's random draw: the noise of the scales that train (this one, and with
 /// concurrent training the coarser ones that train with it) and the volume of the frozen scales
 /// below them. As in SinGAN, noise is drawn once per iteration: the critic steps see the same
@@ -281,8 +285,13 @@ impl Stage for VolumeScale<'_> {
             losses.penalty = Some(penalty);
         }
         let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
-        let (mut fitted_sum, mut opacity_sum, mut colour_sum_generated) = (0.0, 0.0, 0.0);
-        let (mut volume_adversarial_sum, mut chroma_sum) = (0.0, 0.0);
+        let (mut fitted_sum, mut opacity_sum, mut volume_adversarial_sum) = (0.0, 0.0, 0.0);
+        // The distribution terms on the samples' colours, each with its weight.
+        let colour_terms: [(f64, ColourLoss); 2] = [
+            (self.config.lambda_colour, colour_distribution_loss),
+            (self.config.lambda_chroma, chroma_distribution_loss),
+        ];
+        let mut colour_sums = [0.0f32; 2];
         // The terms on the samples' rendered opacity, each with its weight at this scale.
         let opacity_terms: [(f64, OpacityLoss); 3] = [
             (self.config.lambda_height_profile, height_profile_loss),
@@ -320,19 +329,18 @@ impl Stage for VolumeScale<'_> {
                 let adv = self.critic.generator_loss(&fake)?;
                 adversarial_sum += adv.to_scalar::<f32>()?;
                 total = (total + adv)?;
-                if self.config.lambda_colour > 0.0 {
-                    let real = select(&self.level.images, &fake_views)?;
-                    let loss = (colour_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
-                        * self.config.lambda_colour)?;
-                    colour_sum_generated += loss.to_scalar::<f32>()?;
-                    total = (total + loss)?;
-                }
-                if self.config.lambda_chroma > 0.0 {
-                    let real = select(&self.level.images, &fake_views)?;
-                    let loss = (chroma_distribution_loss(&fake.narrow(1, 0, 3)?, &real, rng)?
-                        * self.config.lambda_chroma)?;
-                    chroma_sum += loss.to_scalar::<f32>()?;
-                    total = (total + loss)?;
+                if colour_terms.iter().any(|(weight, _)| *weight > 0.0) {
+                    let (colour, real) = (
+                        fake.narrow(1, 0, 3)?,
+                        select(&self.level.images, &fake_views)?,
+                    );
+                    for ((weight, loss), sum) in colour_terms.iter().zip(&mut colour_sums) {
+                        if *weight > 0.0 {
+                            let loss = (loss(&colour, &real, rng)? * *weight)?;
+                            *sum += loss.to_scalar::<f32>()?;
+                            total = (total + loss)?;
+                        }
+                    }
                 }
                 if opacity_terms.iter().any(|(weight, ..)| *weight > 0.0) {
                     // Validation keeps these weights at 0 unless the critics' views end with
@@ -398,10 +406,11 @@ impl Stage for VolumeScale<'_> {
         losses.volume_adversarial =
             (adversarial && self.volume_critic.is_some()).then_some(volume_adversarial_sum / steps);
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
-        losses.colour_distribution = (adversarial && self.config.lambda_colour > 0.0)
-            .then_some(colour_sum_generated / steps);
-        losses.chroma_distribution =
-            (adversarial && self.config.lambda_chroma > 0.0).then_some(chroma_sum / steps);
+        let reported_colour = |term: usize| {
+            (adversarial && colour_terms[term].0 > 0.0).then_some(colour_sums[term] / steps)
+        };
+        losses.colour_distribution = reported_colour(0);
+        losses.chroma_distribution = reported_colour(1);
         let reported = |term: usize| {
             (adversarial && opacity_terms[term].0 > 0.0).then_some(opacity_sums[term] / steps)
         };
