@@ -406,17 +406,13 @@ impl Stage for VolumeScale<'_> {
         losses.volume_adversarial =
             (adversarial && self.volume_critic.is_some()).then_some(volume_adversarial_sum / steps);
         losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
-        let reported_colour = |term: usize| {
-            (adversarial && colour_terms[term].0 > 0.0).then_some(colour_sums[term] / steps)
-        };
-        losses.colour_distribution = reported_colour(0);
-        losses.chroma_distribution = reported_colour(1);
-        let reported = |term: usize| {
-            (adversarial && opacity_terms[term].0 > 0.0).then_some(opacity_sums[term] / steps)
-        };
-        losses.height_profile = reported(0);
-        losses.opacity_binary = reported(1);
-        losses.opacity_distribution = reported(2);
+        // A sample term's mean, reported when it acted: in adversarial iterations, weighted.
+        let reported = |weight: f64, sum: f32| (adversarial && weight > 0.0).then_some(sum / steps);
+        losses.colour_distribution = reported(colour_terms[0].0, colour_sums[0]);
+        losses.chroma_distribution = reported(colour_terms[1].0, colour_sums[1]);
+        losses.height_profile = reported(opacity_terms[0].0, opacity_sums[0]);
+        losses.opacity_binary = reported(opacity_terms[1].0, opacity_sums[1]);
+        losses.opacity_distribution = reported(opacity_terms[2].0, opacity_sums[2]);
         Ok(losses)
     }
 
