@@ -314,11 +314,12 @@ fn uniform_schedule(iterations: usize, scales: usize) -> Vec<ScaleSchedule> {
     vec![ScaleSchedule::quarter_reconstruction(iterations); scales]
 }
 
-/// Iterations per scale of the `tiny` preset: the coarse scale, which is cheap and forms the
+/// Iterations per scale of the `tiny` preset: the coarsest scale, which is cheap and forms the
 /// scene's layout, trains long; the two finer 3D scales, where V* and the samples' sharpness
-/// gain most, twice as long. Scale 2 had 160 and scale 3 240 until both scenes measured better
-/// with 480 on every metric but Diversity-MV (V*'s volume +0.4 dB on the stones, +0.6 dB on
-/// the scene made in Blender; docs/training.md has the tables and times, about 3 minutes more).
+/// gain most, twice as long. Scale 2 had 160 and scale 3 240 until 480 each measured better
+/// on every metric on the scene made in Blender and in the reconstruction, patches and floaters
+/// on the stones (V*'s volume +0.6 and +0.4 dB; docs/training.md has the tables and times:
+/// about 3 minutes more).
 const TINY_ITERATIONS: [usize; 4] = [240, 480, 480, 80];
 
 /// Iterations per scale of the `small` preset: `tiny`'s coarse scales, then fewer where an
