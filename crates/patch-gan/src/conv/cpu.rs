@@ -40,6 +40,21 @@ impl Geometry {
     pub fn output(&self) -> [usize; 3] {
         [0, 1, 2].map(|a| (self.input[a] + 2 * self.padding[a] - self.kernel[a]) / self.stride + 1)
     }
+
+    /// The transposed convolution as a forward one, whose output is this one's input: channels
+    /// swapped, padding `k - 1 - p`. Exists for stride 1 and padding below the kernel on every
+    /// axis (a larger padding or a stride has no such padding).
+    pub fn transposed(&self) -> Option<Geometry> {
+        (self.stride == 1 && (0..3).all(|a| self.padding[a] < self.kernel[a])).then(|| Geometry {
+            batch: self.batch,
+            c_in: self.c_out,
+            c_out: self.c_in,
+            input: self.output(),
+            kernel: self.kernel,
+            padding: [0, 1, 2].map(|a| self.kernel[a] - 1 - self.padding[a]),
+            stride: 1,
+        })
+    }
 }
 
 /// A work item of [`forward`] and [`grad_weight`]: `(batch item, first output column, columns)`.
@@ -323,12 +338,18 @@ pub(crate) fn flipped_transposed<T: Element>(w: &[T], g: &impl Columns) -> Vec<T
 
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `x`: shape `(N, C_in, D, H, W)`.
 ///
-/// This is a transposed convolution, computed as a forward one: the output gradient is scattered
-/// into a zero grid of size `input + k - 1` per axis (entry `o` lands at `stride o + k - 1 - padding`,
-/// which also undoes the stride), and convolved without padding with the kernel flipped on all
-/// three axes and its two channel axes swapped.
+/// This is a transposed convolution, computed as a forward one with the kernel flipped on all
+/// three axes and its two channel axes swapped. With stride 1 and padding below the kernel it is
+/// [`Geometry::transposed`]'s convolution of the output gradient as it is; otherwise the output
+/// gradient is first scattered into a zero grid of size `input + k - 1` per axis (entry `o` lands
+/// at `stride o + k - 1 - padding`, which also undoes the stride) and convolved without padding.
 pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> Vec<T> {
     let (k, s) = (g.kernel, g.stride);
+    if let Some(transposed) = g.transposed() {
+        // Nothing to undo: the zeros the scatter would put around the output gradient are the
+        // forward kernel's own padding, which it never stores.
+        return forward(grad_out, &flipped_transposed(w, g), &transposed);
+    }
     let out = g.output();
     let grid = [0, 1, 2].map(|a| g.input[a] + k[a] - 1);
     let grid_vox: usize = grid.iter().product();

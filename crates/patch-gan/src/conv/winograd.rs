@@ -702,17 +702,11 @@ pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `x`, as
 /// [`super::cpu::grad_input`]: the forward pass of the transposed convolution.
 pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> Vec<T> {
-    let flipped = super::cpu::flipped_transposed(w, g);
-    let transposed = Geometry {
-        batch: g.batch,
-        c_in: g.c_out,
-        c_out: g.c_in,
-        input: g.output(),
-        kernel: g.kernel,
-        padding: [0, 1, 2].map(|a| g.kernel[a] - 1 - g.padding[a]),
-        stride: 1,
+    // `supports` admits only geometries that have one; the im2col kernel handles any other.
+    let Some(transposed) = g.transposed() else {
+        return super::cpu::grad_input(grad_out, w, g);
     };
-    forward(grad_out, &flipped, &transposed)
+    forward(grad_out, &super::cpu::flipped_transposed(w, g), &transposed)
 }
 
 /// What every chunk of a weight-gradient pass reads.

@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::channels_and_plane;
+use super::{channels_and_plane, lane_sums};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -96,11 +96,11 @@ fn channel_stats<T: Element>(x: &[T], channels: usize, plane: usize) -> Vec<(f64
         .map(|c| {
             let planes = || (0..batch).map(move |n| &x[(n * channels + c) * plane..][..plane]);
             let mean = planes()
-                .map(|p| p.iter().map(|v| v.to_f64()).sum::<f64>())
+                .map(|p| lane_sums(p, p, |v, _| [v.to_f64()])[0])
                 .sum::<f64>()
                 / count;
             let var = planes()
-                .map(|p| p.iter().map(|v| (v.to_f64() - mean).powi(2)).sum::<f64>())
+                .map(|p| lane_sums(p, p, |v, _| [(v.to_f64() - mean).powi(2)])[0])
                 .sum::<f64>()
                 / count;
             (mean, var)
@@ -278,16 +278,17 @@ impl BatchNormActGrad {
                 let (mut sum_g, mut sum_gx) = (0.0, 0.0);
                 for n in 0..batch {
                     let at = (n * channels + c) * plane;
-                    for (&v, &g) in x[at..at + plane].iter().zip(&grad[at..at + plane]) {
+                    let [g, gx] = lane_sums(&x[at..][..plane], &grad[at..][..plane], |v, g| {
                         let g = if v * scale + shift > T::ZERO {
                             g
                         } else {
                             g * slope
                         }
                         .to_f64();
-                        sum_g += g;
-                        sum_gx += g * (v.to_f64() - mean) * inv;
-                    }
+                        [g, g * (v.to_f64() - mean) * inv]
+                    });
+                    sum_g += g;
+                    sum_gx += gx;
                 }
                 (sum_g, sum_gx)
             })

@@ -3,7 +3,7 @@
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::channels_and_plane;
+use super::{channels_and_plane, lane_sums};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -34,8 +34,8 @@ impl Kernel for ChannelSumKernel {
             .map(|c| {
                 let total: f64 = (0..batch)
                     .map(|n| {
-                        let at = (n * channels + c) * plane;
-                        x[at..at + plane].iter().map(|v| v.to_f64()).sum::<f64>()
+                        let p = &x[(n * channels + c) * plane..][..plane];
+                        lane_sums(p, p, |v, _| [v.to_f64()])[0]
                     })
                     .sum();
                 T::from_f64(total)

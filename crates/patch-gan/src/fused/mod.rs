@@ -17,12 +17,73 @@ pub(crate) use batch_norm::{batch_norm_act, NormStats};
 pub(crate) use leaky::leaky_grad;
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
+use crate::element::Element;
+
 /// Elements per parallel task of the element-wise kernels: large enough that rayon's overhead
 /// vanishes, small enough that two threads share the work evenly.
 const CHUNK: usize = 1 << 14;
+
+/// Independent partial sums of [`lane_sums`].
+const SUM_LANES: usize = 8;
+
+/// `sum_i f(a_i, b_i)` in f64 over two equally long slices, for `K` sums at once, as eight
+/// interleaved partial sums (element `i` goes to lane `i % 8`) added at the end. One chain of
+/// f64 additions waits on the adder's latency at every element; eight independent ones do not.
+/// The order is fixed, so the bits do not depend on the thread count. (One slice: pass it twice
+/// and ignore the second argument.)
+fn lane_sums<T: Element, const K: usize>(
+    a: &[T],
+    b: &[T],
+    f: impl Fn(T, T) -> [f64; K],
+) -> [f64; K] {
+    let mut lanes = [[0f64; SUM_LANES]; K];
+    let (blocks_a, blocks_b) = (a.chunks_exact(SUM_LANES), b.chunks_exact(SUM_LANES));
+    let tail = blocks_a.remainder().iter().zip(blocks_b.remainder());
+    for (xa, xb) in blocks_a.zip(blocks_b) {
+        for lane in 0..SUM_LANES {
+            let v = f(xa[lane], xb[lane]);
+            for k in 0..K {
+                lanes[k][lane] += v[k];
+            }
+        }
+    }
+    let mut total = lanes.map(|l| l.iter().sum::<f64>());
+    for (&x, &y) in tail {
+        let v = f(x, y);
+        for k in 0..K {
+            total[k] += v[k];
+        }
+    }
+    total
+}
 
 /// The `(channels, plane)` split of an `(N, C, ...)` tensor: `C` and the product of the axes after it.
 fn channels_and_plane(dims: &[usize]) -> (usize, usize) {
     let channels = dims.get(1).copied().unwrap_or(1);
     (channels, dims.iter().skip(2).product())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lane_sums_equal_plain_sums_for_every_tail_length() {
+        for len in 0..27 {
+            let a: Vec<f32> = (0..len).map(|i| (i as f32 * 0.37).sin()).collect();
+            let b: Vec<f32> = (0..len).map(|i| 1.0 + i as f32 / 8.0).collect();
+            let [s, sp] = lane_sums(&a, &b, |x, y| [x.to_f64(), x.to_f64() * y.to_f64()]);
+            let plain: f64 = a.iter().map(|&x| f64::from(x)).sum();
+            let products: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(&x, &y)| f64::from(x) * f64::from(y))
+                .sum();
+            assert!((s - plain).abs() < 1e-12, "len {len}: {s} vs {plain}");
+            assert!(
+                (sp - products).abs() < 1e-12,
+                "len {len}: {sp} vs {products}"
+            );
+        }
+    }
 }
