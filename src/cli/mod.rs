@@ -67,6 +67,14 @@ pub fn run() -> ExitCode {
     if std::env::var_os("CANDLE_BARRIER_POOL_SPIN_LIMIT").is_none() {
         std::env::set_var("CANDLE_BARRIER_POOL_SPIN_LIMIT", "1");
     }
+    // And that pool runs on the calling thread alone: the work it gets between our own threaded
+    // kernels is gradient bookkeeping (`zeros_like`, `add`) and small ops, where handing each op
+    // to a parked worker (two `futex` calls) cost more than the second core gave back. `tiny`
+    // trained 1.07x faster with it (docs/training.md). This pool only: the convolutions, the
+    // renderer and candle's matmul keep rayon's threads. A value the user set is kept.
+    if std::env::var_os("CANDLE_NUM_THREADS").is_none() {
+        std::env::set_var("CANDLE_NUM_THREADS", "1");
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
