@@ -343,7 +343,6 @@ impl<const AXES: usize> Module for PatchDiscriminator<AXES> {
             let convolved = Self::conv(&x, &layer.weight)?;
             x = bias_leaky_relu(&convolved, &layer.bias, LEAKY_SLOPE)?;
         }
-        let bias_shape = vec![1; AXES + 2];
-        Self::conv(&x, &self.tail.weight)?.broadcast_add(&self.tail.bias.reshape(bias_shape)?)
+        crate::fused::bias_add(&Self::conv(&x, &self.tail.weight)?, &self.tail.bias)
     }
 }

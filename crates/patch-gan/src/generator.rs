@@ -218,7 +218,7 @@ impl Generator3d {
         }
         let mut residual = op::conv3d_active(&h, self.tail.weight(), sites)?;
         if let Some(bias) = self.tail.bias() {
-            residual = residual.broadcast_add(&bias.reshape((1, (), 1, 1, 1))?)?;
+            residual = crate::fused::bias_add(&residual, bias)?;
         }
         Ok((prev_up + active::scatter(&residual, sites)?)?)
     }

@@ -68,7 +68,7 @@ impl Module for Conv2d {
         let ys = op::conv2d(xs, &self.weight, self.config)?;
         match &self.bias {
             None => Ok(ys),
-            Some(b) => ys.broadcast_add(&b.reshape((1, (), 1, 1))?),
+            Some(b) => crate::fused::bias_add(&ys, b),
         }
     }
 }

@@ -68,7 +68,7 @@ impl Module for Conv3d {
         let ys = op::conv3d(xs, &self.weight, self.config)?;
         match &self.bias {
             None => Ok(ys),
-            Some(b) => ys.broadcast_add(&b.reshape((1, (), 1, 1, 1))?),
+            Some(b) => crate::fused::bias_add(&ys, b),
         }
     }
 }

@@ -14,7 +14,7 @@ mod channel_sum;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, NormStats};
-pub(crate) use leaky::leaky_grad;
+pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
 use crate::element::Element;
@@ -84,6 +84,42 @@ mod tests {
                 (sp - products).abs() < 1e-12,
                 "len {len}: {sp} vs {products}"
             );
+        }
+    }
+
+    #[test]
+    fn bias_add_equals_broadcast_add_in_value_and_both_gradients() {
+        use candle_core::{Device, Tensor, Var};
+        let dev = Device::Cpu;
+        let values: Vec<f64> = (0..120).map(|i| (i as f64 * 0.37 - 20.0).sin()).collect();
+        let xs = Var::from_tensor(&Tensor::from_vec(values, (2, 3, 4, 5), &dev).unwrap()).unwrap();
+        let bias = Var::from_tensor(&Tensor::new(&[0.5f64, -1.25, 2.], &dev).unwrap()).unwrap();
+        // A loss that weighs every value differently, so every gradient entry is checked.
+        let weights: Vec<f64> = (0..120).map(|i| 1.0 + (i % 7) as f64).collect();
+        let weights = Tensor::from_vec(weights, (2, 3, 4, 5), &dev).unwrap();
+        let run = |ys: Tensor| -> Vec<Vec<f64>> {
+            let grads = (&ys * &weights)
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .backward()
+                .unwrap();
+            let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+            vec![
+                flat(&ys),
+                flat(grads.get(&xs).unwrap()),
+                flat(grads.get(&bias).unwrap()),
+            ]
+        };
+        let ours = run(bias_add(&xs, &bias).unwrap());
+        let reference = run(xs
+            .broadcast_add(&bias.reshape((1, 3, 1, 1)).unwrap())
+            .unwrap());
+        for (a, b) in ours.iter().zip(&reference) {
+            assert_eq!(a.len(), b.len());
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() < 1e-12, "{x} vs {y}");
+            }
         }
     }
 }
