@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::{channels_and_plane, lane_sums};
+use super::{channels_and_plane, lane_sum, lane_sums};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -95,12 +95,9 @@ fn channel_stats<T: Element>(x: &[T], channels: usize, plane: usize) -> Vec<(f64
         .into_par_iter()
         .map(|c| {
             let planes = || (0..batch).map(move |n| &x[(n * channels + c) * plane..][..plane]);
-            let mean = planes()
-                .map(|p| lane_sums(p, p, |v, _| [v.to_f64()])[0])
-                .sum::<f64>()
-                / count;
+            let mean = planes().map(|p| lane_sum(p, |v| v.to_f64())).sum::<f64>() / count;
             let var = planes()
-                .map(|p| lane_sums(p, p, |v, _| [(v.to_f64() - mean).powi(2)])[0])
+                .map(|p| lane_sum(p, |v| (v.to_f64() - mean).powi(2)))
                 .sum::<f64>()
                 / count;
             (mean, var)

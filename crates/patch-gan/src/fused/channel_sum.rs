@@ -3,7 +3,7 @@
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::{channels_and_plane, lane_sums};
+use super::{channels_and_plane, lane_sum};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -35,7 +35,7 @@ impl Kernel for ChannelSumKernel {
                 let total: f64 = (0..batch)
                     .map(|n| {
                         let p = &x[(n * channels + c) * plane..][..plane];
-                        lane_sums(p, p, |v, _| [v.to_f64()])[0]
+                        lane_sum(p, |v| v.to_f64())
                     })
                     .sum();
                 T::from_f64(total)

@@ -70,7 +70,7 @@ pub fn bias_leaky_relu(
 /// slope 1, the identity. candle's `broadcast_add` is the same sum, but its backward reduces the
 /// gradient to the bias with `sum_keepdim` over every other axis, one thread striding across the
 /// tensor (18% of the main thread's samples in the upsampler's training scale); here the bias's
-/// gradient is the per-channel parallel sum.
+/// gradient is the per-channel parallel sum and the input's is the incoming gradient as it is.
 pub(crate) fn bias_add(xs: &Tensor, bias: &Tensor) -> candle_core::Result<Tensor> {
     bias_leaky_relu(xs, bias, 1.0)
 }
@@ -84,6 +84,10 @@ pub(crate) fn leaky_grad(
     output: &Tensor,
     slope: f64,
 ) -> candle_core::Result<Tensor> {
+    if slope == 1.0 {
+        // The identity ([`bias_add`]): both branches pass the gradient as it is, so no pass over it.
+        return Ok(grad.clone());
+    }
     grad.contiguous()?
         .apply_op2(&output.detach().contiguous()?, LeakyGrad(slope))
 }

@@ -29,8 +29,7 @@ const SUM_LANES: usize = 8;
 /// `sum_i f(a_i, b_i)` in f64 over two equally long slices, for `K` sums at once, as eight
 /// interleaved partial sums (element `i` goes to lane `i % 8`) added at the end. One chain of
 /// f64 additions waits on the adder's latency at every element; eight independent ones do not.
-/// The order is fixed, so the bits do not depend on the thread count. (One slice: pass it twice
-/// and ignore the second argument.)
+/// The order is fixed, so the bits do not depend on the thread count.
 fn lane_sums<T: Element, const K: usize>(
     a: &[T],
     b: &[T],
@@ -55,6 +54,11 @@ fn lane_sums<T: Element, const K: usize>(
         }
     }
     total
+}
+
+/// `sum_i f(x_i)` over one slice, as [`lane_sums`].
+fn lane_sum<T: Element>(xs: &[T], f: impl Fn(T) -> f64) -> f64 {
+    lane_sums(xs, xs, |x, _| [f(x)])[0]
 }
 
 /// The `(channels, plane)` split of an `(N, C, ...)` tensor: `C` and the product of the axes after it.
