@@ -176,6 +176,20 @@ pub struct TrainConfig {
     /// V*_n per-voxel freedom the shared generator lacks.
     #[serde(default)]
     pub reconstruction_noise_lr: f64,
+    /// Adds scale n's noise to its volume as well as to the generator's input:
+    /// `x_n = up(x_{n-1}) + z_n + G_n(up(x_{n-1}) + z_n)` at the 3D scales n >= 2. With an
+    /// optimised z*_n ([`TrainConfig::reconstruction_noise_lr`]) the reconstruction gets a free
+    /// value per voxel, as a direct fit has; random samples get their noise (of SinGAN's
+    /// amplitude, far below a voxel's value) once more. `false` (SinGAN's model, and runs made
+    /// before it existed): the noise reaches the volume only through G_n.
+    #[serde(default)]
+    pub noise_skip: bool,
+    /// The reconstruction noise's learning rate at the end of each 3D scale: from
+    /// [`TrainConfig::reconstruction_noise_lr`] it decays exponentially to this over the
+    /// scale's iterations, as `volgen fit` decays its grid's rate. `None` (runs made before it
+    /// existed): constant.
+    #[serde(default)]
+    pub reconstruction_noise_final_lr: Option<f64>,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -521,6 +535,8 @@ impl TrainConfig {
             opacity_binary_until_scale: None,
             lambda_opacity_distribution: 0.0,
             reconstruction_noise_lr: 0.0,
+            noise_skip: false,
+            reconstruction_noise_final_lr: None,
             sparse_from_scale: Some(SPARSE_FROM_SCALE),
             sparse_threshold: SPARSE_THRESHOLD,
             sparse_margin: SPARSE_MARGIN,
@@ -674,10 +690,31 @@ impl TrainConfig {
         self.learning_rate * self.decay_at(n, iteration)
     }
 
-    /// The reconstruction noise's learning rate at `iteration` of scale `n`: decayed with the
-    /// networks' ([`TrainConfig::learning_rate_at`]).
+    /// The reconstruction noise's learning rate at `iteration` of scale `n`: decayed
+    /// exponentially towards [`TrainConfig::reconstruction_noise_final_lr`] when that is set,
+    /// and with the networks' ([`TrainConfig::learning_rate_at`]).
+    ///
+    /// ```
+    /// use singrav::config::TrainConfig;
+    /// let config = TrainConfig {
+    ///     reconstruction_noise_lr: 0.1,
+    ///     reconstruction_noise_final_lr: Some(0.01),
+    ///     ..TrainConfig::preset("tiny")?
+    /// };
+    /// // tiny's scale 3 runs 480 iterations: a tenth at the end, a third of the way at half.
+    /// assert!((config.reconstruction_noise_lr_at(3, 0) - 0.1).abs() < 1e-12);
+    /// assert!((config.reconstruction_noise_lr_at(3, 240) - 0.1 * 0.1f64.sqrt()).abs() < 1e-12);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
     pub fn reconstruction_noise_lr_at(&self, n: usize, iteration: usize) -> f64 {
-        self.reconstruction_noise_lr * self.decay_at(n, iteration)
+        let along = match self.reconstruction_noise_final_lr {
+            Some(last) if self.reconstruction_noise_lr > 0.0 => {
+                let fraction = iteration as f64 / self.scale_schedule(n).iterations.max(1) as f64;
+                (last / self.reconstruction_noise_lr).powf(fraction)
+            }
+            _ => 1.0,
+        };
+        self.reconstruction_noise_lr * along * self.decay_at(n, iteration)
     }
 
     /// The factor `lr_decay` puts on the learning rates at `iteration` of scale `n` (1 before
@@ -832,6 +869,14 @@ impl TrainConfig {
             "learning rate",
             self.reconstruction_noise_lr,
         )?;
+        if let Some(last) = self.reconstruction_noise_final_lr {
+            if !(last > 0.0 && last.is_finite()) {
+                return Err(invalid(
+                    "reconstruction_noise_final_lr",
+                    format!("expected a finite learning rate > 0, got {last}"),
+                ));
+            }
+        }
         if let Some(bounds) = self.bounds {
             SceneBounds::new(bounds.min, bounds.max)?;
         }
@@ -1080,6 +1125,8 @@ mod tests {
             "scale_views",
             "lambda_height_profile",
             "reconstruction_noise_lr",
+            "noise_skip",
+            "reconstruction_noise_final_lr",
             "lambda_opacity_binary",
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
@@ -1099,6 +1146,8 @@ mod tests {
         assert_eq!(old.scale_views, None);
         assert_eq!(old.lambda_height_profile, 0.0);
         assert_eq!(old.reconstruction_noise_lr, 0.0);
+        assert!(!old.noise_skip);
+        assert_eq!(old.reconstruction_noise_final_lr, None);
         assert_eq!(old.lambda_opacity_binary, 0.0);
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);
@@ -1139,6 +1188,7 @@ mod tests {
             assert!(err.contains("sparse_threshold"), "{err}");
         }
         refused("reconstruction_noise_lr", "-0.01");
+        refused("reconstruction_noise_final_lr", "0");
         // micro has two 3D scales.
         refused("opacity_binary_until_scale", "0");
         refused("opacity_binary_until_scale", "3");

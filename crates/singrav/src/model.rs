@@ -340,9 +340,10 @@ impl SinGrav {
         Ok(generator.forward_t(&input, true)?)
     }
 
-    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1;
-    /// from the configuration's `sparse_from_scale` on, the residual only in the active set of
-    /// `up(prev)` (see [`crate::active_set`]).
+    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1,
+    /// plus `z` itself with the configuration's `noise_skip`; from the configuration's
+    /// `sparse_from_scale` on, the residual only in the active set of `up(prev)` (see
+    /// [`crate::active_set`]).
     pub fn refine(&self, n: usize, z: &Tensor, prev: &Tensor) -> Result<Tensor> {
         let (generator, _) = self
             .generators
@@ -350,7 +351,7 @@ impl SinGrav {
             .filter(|_| n >= 2)
             .ok_or_else(|| invalid("scale", format!("3D scale {n} is not built")))?;
         let up = self.upsample_to_scale(prev, n)?;
-        match self.config.sparse_from_scale {
+        let volume = match self.config.sparse_from_scale {
             Some(from) if n >= from => {
                 let sites = Arc::new(active_sites(
                     &up,
@@ -358,9 +359,14 @@ impl SinGrav {
                     &self.config.active_set_rule(),
                     generator.config().kernel,
                 )?);
-                Ok(generator.forward_residual_active(z, &up, &sites, true)?)
+                generator.forward_residual_active(z, &up, &sites, true)?
             }
-            _ => Ok(generator.forward_residual(z, &up, true)?),
+            _ => generator.forward_residual(z, &up, true)?,
+        };
+        if self.config.noise_skip {
+            Ok((volume + z)?)
+        } else {
+            Ok(volume)
         }
     }
 

@@ -647,6 +647,38 @@ fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
     assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
 }
 
+/// With `noise_skip` a scale's noise reaches its volume directly: a new finer scale (whose
+/// generator starts at a zero residual) gives exactly `up(coarser) + z`, on the dense path and
+/// on the active set's.
+#[test]
+fn with_noise_skip_a_new_scale_adds_its_noise_to_the_upsampled_volume() {
+    let device = Device::Cpu;
+    for sparse_from_scale in [None, Some(2)] {
+        let config = TrainConfig {
+            noise_skip: true,
+            sparse_from_scale,
+            ..micro()
+        };
+        let mut rng = singrav::noise::step_rng(0, 0, 0);
+        let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
+        model.push_generator(1.0, &mut rng).unwrap();
+        let coarse = model.coarsest(model.z_star()).unwrap();
+        model.push_generator(0.1, &mut rng).unwrap();
+        let size = config.volume_sizes[1];
+        let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
+        let refined = model.refine(2, &z, &coarse).unwrap();
+        let expected = (model.upsample_to_scale(&coarse, 2).unwrap() + &z).unwrap();
+        let diff = (refined - expected)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .flatten_all()
+            .unwrap();
+        let largest = diff.max(0).unwrap().to_scalar::<f32>().unwrap();
+        assert_eq!(largest, 0.0, "sparse_from_scale {sparse_from_scale:?}");
+    }
+}
+
 #[test]
 fn active_set_scales_change_the_volume_only_near_matter() {
     let mut config = micro();
