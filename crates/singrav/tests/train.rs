@@ -614,37 +614,57 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
     }
 }
 
-#[test]
-fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
-    let config = micro();
+/// A model of `config` with two fresh 3D scales, the coarser one's reconstruction, noise of
+/// the finer scale's shape, what scale 2 makes of them, and the rng that drew them.
+struct TwoScales {
+    model: SinGrav,
+    coarse: Tensor,
+    z: Tensor,
+    refined: Tensor,
+    rng: rand_chacha::ChaCha8Rng,
+}
+
+fn two_fresh_scales(config: &TrainConfig) -> TwoScales {
     let device = Device::Cpu;
     let mut rng = singrav::noise::step_rng(0, 0, 0);
-    let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
+    let mut model = SinGrav::new(config, &device, &mut rng).unwrap();
     model.push_generator(1.0, &mut rng).unwrap();
     let coarse = model.coarsest(model.z_star()).unwrap();
     model.push_generator(0.1, &mut rng).unwrap();
     let size = config.volume_sizes[1];
     let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
     let refined = model.refine(2, &z, &coarse).unwrap();
+    TwoScales {
+        model,
+        coarse,
+        z,
+        refined,
+        rng,
+    }
+}
+
+/// The largest absolute difference between two tensors of one shape.
+fn largest_difference(a: &Tensor, b: &Tensor) -> f32 {
+    let diff = (a - b).unwrap().abs().unwrap().flatten_all().unwrap();
+    diff.max(0).unwrap().to_scalar::<f32>().unwrap()
+}
+
+#[test]
+fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
+    let TwoScales {
+        mut model,
+        coarse,
+        refined,
+        mut rng,
+        ..
+    } = two_fresh_scales(&micro());
     let upsampled = model.upsample_to_scale(&coarse, 2).unwrap();
-    let diff = (refined - upsampled)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap();
-    assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+    assert_eq!(largest_difference(&refined, &upsampled), 0.0);
     model.push_upsampler(&mut rng).unwrap();
-    let images = Tensor::rand(0f32, 1., (2, 3, 6, 5), &device).unwrap();
+    let images = Tensor::rand(0f32, 1., (2, 3, 6, 5), &Device::Cpu).unwrap();
     let doubled = model.upsample_images(&images).unwrap();
     let bilinear = patch_gan::upsample_bilinear2x(&images).unwrap();
-    let diff = (doubled - bilinear)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap();
-    assert_eq!(diff.max(0).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+    assert_eq!(largest_difference(&doubled, &bilinear), 0.0);
 }
 
 /// With `noise_skip` a scale's noise reaches its volume directly: a new finer scale (whose
@@ -652,29 +672,21 @@ fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
 /// on the active set's.
 #[test]
 fn with_noise_skip_a_new_scale_adds_its_noise_to_the_upsampled_volume() {
-    let device = Device::Cpu;
     for sparse_from_scale in [None, Some(2)] {
         let config = TrainConfig {
             noise_skip: true,
             sparse_from_scale,
             ..micro()
         };
-        let mut rng = singrav::noise::step_rng(0, 0, 0);
-        let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
-        model.push_generator(1.0, &mut rng).unwrap();
-        let coarse = model.coarsest(model.z_star()).unwrap();
-        model.push_generator(0.1, &mut rng).unwrap();
-        let size = config.volume_sizes[1];
-        let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
-        let refined = model.refine(2, &z, &coarse).unwrap();
+        let TwoScales {
+            model,
+            coarse,
+            z,
+            refined,
+            ..
+        } = two_fresh_scales(&config);
         let expected = (model.upsample_to_scale(&coarse, 2).unwrap() + &z).unwrap();
-        let diff = (refined - expected)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap();
-        let largest = diff.max(0).unwrap().to_scalar::<f32>().unwrap();
+        let largest = largest_difference(&refined, &expected);
         assert_eq!(largest, 0.0, "sparse_from_scale {sparse_from_scale:?}");
     }
 }
