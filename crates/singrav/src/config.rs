@@ -190,6 +190,11 @@ pub struct TrainConfig {
     /// existed): constant.
     #[serde(default)]
     pub reconstruction_noise_final_lr: Option<f64>,
+    /// The fraction of each 3D scale's iterations before which the reconstruction noise stays
+    /// as it is (rate 0); the decay to [`TrainConfig::reconstruction_noise_final_lr`] runs over
+    /// the rest. 0 (runs made before it existed): z*_n moves from the first iteration.
+    #[serde(default)]
+    pub reconstruction_noise_from: f64,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -537,6 +542,7 @@ impl TrainConfig {
             reconstruction_noise_lr: 0.0,
             noise_skip: false,
             reconstruction_noise_final_lr: None,
+            reconstruction_noise_from: 0.0,
             sparse_from_scale: Some(SPARSE_FROM_SCALE),
             sparse_threshold: SPARSE_THRESHOLD,
             sparse_margin: SPARSE_MARGIN,
@@ -704,13 +710,23 @@ impl TrainConfig {
     /// // tiny's scale 3 runs 480 iterations: a tenth at the end, a third of the way at half.
     /// assert!((config.reconstruction_noise_lr_at(3, 0) - 0.1).abs() < 1e-12);
     /// assert!((config.reconstruction_noise_lr_at(3, 240) - 0.1 * 0.1f64.sqrt()).abs() < 1e-12);
+    /// // From half-way on only: still until then, the same decay over the second half.
+    /// let late = TrainConfig { reconstruction_noise_from: 0.5, ..config };
+    /// assert_eq!(late.reconstruction_noise_lr_at(3, 239), 0.0);
+    /// assert!((late.reconstruction_noise_lr_at(3, 240) - 0.1).abs() < 1e-12);
+    /// assert!((late.reconstruction_noise_lr_at(3, 360) - 0.1 * 0.1f64.sqrt()).abs() < 1e-12);
     /// # Ok::<(), singrav::Error>(())
     /// ```
     pub fn reconstruction_noise_lr_at(&self, n: usize, iteration: usize) -> f64 {
+        let fraction = iteration as f64 / self.scale_schedule(n).iterations.max(1) as f64;
+        if fraction < self.reconstruction_noise_from {
+            return 0.0;
+        }
         let along = match self.reconstruction_noise_final_lr {
             Some(last) if self.reconstruction_noise_lr > 0.0 => {
-                let fraction = iteration as f64 / self.scale_schedule(n).iterations.max(1) as f64;
-                (last / self.reconstruction_noise_lr).powf(fraction)
+                let window = (fraction - self.reconstruction_noise_from)
+                    / (1.0 - self.reconstruction_noise_from);
+                (last / self.reconstruction_noise_lr).powf(window)
             }
             _ => 1.0,
         };
@@ -869,6 +885,15 @@ impl TrainConfig {
             "learning rate",
             self.reconstruction_noise_lr,
         )?;
+        if !(0.0..1.0).contains(&self.reconstruction_noise_from) {
+            return Err(invalid(
+                "reconstruction_noise_from",
+                format!(
+                    "expected a fraction of a scale's iterations in [0, 1), got {}",
+                    self.reconstruction_noise_from
+                ),
+            ));
+        }
         if let Some(last) = self.reconstruction_noise_final_lr {
             if !(last > 0.0 && last.is_finite()) {
                 return Err(invalid(
@@ -1127,6 +1152,7 @@ mod tests {
             "reconstruction_noise_lr",
             "noise_skip",
             "reconstruction_noise_final_lr",
+            "reconstruction_noise_from",
             "lambda_opacity_binary",
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
@@ -1148,6 +1174,7 @@ mod tests {
         assert_eq!(old.reconstruction_noise_lr, 0.0);
         assert!(!old.noise_skip);
         assert_eq!(old.reconstruction_noise_final_lr, None);
+        assert_eq!(old.reconstruction_noise_from, 0.0);
         assert_eq!(old.lambda_opacity_binary, 0.0);
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);
@@ -1189,6 +1216,8 @@ mod tests {
         }
         refused("reconstruction_noise_lr", "-0.01");
         refused("reconstruction_noise_final_lr", "0");
+        refused("reconstruction_noise_from", "1");
+        refused("reconstruction_noise_from", "-0.5");
         // micro has two 3D scales.
         refused("opacity_binary_until_scale", "0");
         refused("opacity_binary_until_scale", "3");
