@@ -41,6 +41,18 @@ fn number_after(text: &str, label: &str) -> f64 {
         .unwrap_or_else(|| panic!("no number in `{line}`"))
 }
 
+/// The standard error shown after "±" on `label`'s line of `text`.
+fn error_after(text: &str, label: &str) -> f64 {
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix(label))
+        .unwrap_or_else(|| panic!("no `{label}` line in {text}"));
+    line.split_once('±')
+        .and_then(|(_, rest)| rest.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no `± error` in `{line}`"))
+}
+
 /// The mean over every frame of `data` of the PSNR (f64) of `volume` rendered at the dataset's
 /// resolution over white, with the renderer called directly (two samples per voxel crossed,
 /// as `volgen fit` scores its volumes; no empty-space skipping).
@@ -137,6 +149,20 @@ fn eval_reports_diversity_and_with_weights_sifid() {
             .unwrap_or_else(|| panic!("{key}: {report}"));
         let shown = number_after(&text, label);
         assert!((exact - shown).abs() <= within, "{key}: {exact} vs {shown}");
+    }
+    // The sample metrics carry their standard error over the 3 scenes, shown after "±".
+    for (label, key) in [
+        ("patch_swd_mv:", "patch_swd_mv_stderr"),
+        ("colour_swd:", "colour_swd_stderr"),
+        ("floaters:", "floaters_stderr"),
+        ("Diversity-MV:", "diversity_mv_stderr"),
+    ] {
+        let exact = report[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key}: {report}"));
+        assert!(exact.is_finite() && exact >= 0.0, "{key}: {exact}");
+        let shown = error_after(&text, label);
+        assert!((exact - shown).abs() <= 5e-5, "{key}: {exact} vs {shown}");
     }
     // A barely trained micro model: a poor but not absurd fit, some sky filled, all finite.
     let psnr = report["reconstruction_psnr"].as_f64().unwrap();
@@ -279,6 +305,14 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
         ("-", "-", "-")
     );
     assert_eq!(holdout[5], format!("{held_psnr:.2}"));
+    // The sample metrics with their standard errors over scenes.
+    let colour = report["colour_swd"].as_f64().unwrap();
+    let colour_error = report["colour_swd_stderr"].as_f64().unwrap();
+    assert_eq!(holdout[8], format!("{colour:.4} ± {colour_error:.4}"));
+    // Two scenes leave too few for Diversity-MV's jackknife: its value alone.
+    assert!(report["diversity_mv_stderr"].is_null(), "{report}");
+    let diversity = report["diversity_mv"].as_f64().unwrap();
+    assert_eq!(holdout[10], format!("{diversity:.4}"));
     // V*'s volume over the 4 training and, separately, the 2 held-out frames.
     let volume_psnr = report["volume_psnr"].as_f64().unwrap();
     assert_eq!(holdout[4], format!("{volume_psnr:.2}"));

@@ -17,15 +17,15 @@ use singrav::checkpoint::checkpoint_path;
 use singrav::dataset::{Dataset, DepthKind};
 use singrav::fit::{view_psnr, FitConfig};
 use singrav::metrics::{
-    colour_swd, depth_rmse, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv,
-    InceptionBlock1, PATCH_SWD_MIN_SIDE,
+    colour_swd_per_scene, depth_rmse, diversity_mv, floaters_per_scene, mean_psnr, mean_ssim,
+    patch_swd_per_scene, sifid_mv, Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE,
 };
 use singrav::SinGrav;
 
 /// Arguments of `volgen eval`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = "The paper evaluates 50 scenes from 40 views each \
-    (--scenes 50 --views 40); the defaults are small enough to run in seconds on the tiny \
+    (--scenes 50 --views 40); the defaults take about half a minute on the tiny \
     preset. docs/metrics.md explains the numbers and how to convert InceptionV3's weights.")]
 pub struct EvalArgs {
     /// Trained models: run directories or their checkpoint.safetensors. With several, a
@@ -40,8 +40,11 @@ pub struct EvalArgs {
     /// `volgen train --depth-kind`).
     #[arg(long, value_name = "KIND")]
     depth_kind: Option<DepthKind>,
-    /// Scenes to generate (at least 2; the paper: 50).
-    #[arg(long, default_value_t = 8)]
+    /// Scenes to generate (at least 2; the paper: 50). Every sample metric is shown with its
+    /// standard error over these scenes; with 32 a `tiny` run's floaters vary by about 10%
+    /// between noise seeds, with 8 by twice that (docs/metrics.md, "How precise the sample
+    /// metrics are").
+    #[arg(long, default_value_t = 32)]
     scenes: usize,
     /// Dataset views to compare, evenly spaced over its frames (the paper: 40); as many of the
     /// training and of the held-out frames for the reconstruction.
@@ -99,12 +102,19 @@ struct Evaluation {
     /// Lower is closer to the real views' patch statistics; null for views too small for its
     /// pyramid.
     patch_swd_mv: Option<f64>,
+    /// One standard error of `patch_swd_mv` over the generated scenes (as for every
+    /// `_stderr` below: the value's spread over repeated draws of as many scenes).
+    patch_swd_mv_stderr: Option<f64>,
     /// Lower is closer to the real views' colours.
     colour_swd: f64,
+    colour_swd_stderr: f64,
     /// Mean opacity where the real views are empty; null when no real pixel is empty.
     floaters: Option<f64>,
+    floaters_stderr: Option<f64>,
     /// Higher is more varied; 0 when every scene is the same.
     diversity_mv: f64,
+    /// The jackknife standard error over scenes; null with fewer than 3 scenes.
+    diversity_mv_stderr: Option<f64>,
     /// Lower is closer to the real views' statistics; null without InceptionV3 weights.
     sifid_mv: Option<f64>,
     inception: Option<PathBuf>,
@@ -237,6 +247,22 @@ fn evaluate(
     // The upsampler, when trained, doubles the renderings: compare at the size they came out.
     let image_size = views[0].dim(3)?;
     let real = chosen.level(image_size, image_size, device)?.images;
+    let patch_swd = (image_size >= PATCH_SWD_MIN_SIDE)
+        .then(|| Estimate::mean_of(&patch_swd_per_scene(&views, &real)?))
+        .transpose()
+        .context("patch_swd_mv of the generated scenes")?;
+    let colour = Estimate::mean_of(&colour_swd_per_scene(&views, &real)?)
+        .context("colour_swd of the generated scenes")?;
+    let floaters = floaters_per_scene(&opacity, &coarse.opacity)?
+        .map(|per_scene| Estimate::mean_of(&per_scene))
+        .transpose()
+        .context("floaters of the generated scenes")?;
+    let diversity = diversity_mv(&views, &real)?;
+    let diversity_stderr = (args.scenes >= 3)
+        .then(|| Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real)))
+        .transpose()
+        .context("Diversity-MV of the generated scenes")?
+        .map(|e| e.stderr);
 
     Ok(Evaluation {
         model: model_path.to_path_buf(),
@@ -258,12 +284,14 @@ fn evaluate(
         volume_psnr: training_volume_psnr,
         volume_views: training.len(),
         held_out_volume_psnr,
-        patch_swd_mv: (image_size >= PATCH_SWD_MIN_SIDE)
-            .then(|| patch_swd_mv(&views, &real))
-            .transpose()?,
-        colour_swd: colour_swd(&views, &real)?,
-        floaters: floaters(&opacity, &coarse.opacity)?,
-        diversity_mv: diversity_mv(&views, &real)?,
+        patch_swd_mv: patch_swd.map(|e| e.value),
+        patch_swd_mv_stderr: patch_swd.map(|e| e.stderr),
+        colour_swd: colour.value,
+        colour_swd_stderr: colour.stderr,
+        floaters: floaters.map(|e| e.value),
+        floaters_stderr: floaters.map(|e| e.stderr),
+        diversity_mv: diversity,
+        diversity_mv_stderr: diversity_stderr,
         sifid_mv: block.map(|b| sifid_mv(&views, &real, b)).transpose()?,
         inception: args.inception.clone(),
     })
@@ -361,7 +389,8 @@ fn print_report(e: &Evaluation) {
     }
     match e.patch_swd_mv {
         Some(p) => println!(
-            "patch_swd_mv:              {p:.4}  (lower = patches closer to the real views')"
+            "patch_swd_mv:              {}  (lower = patches closer to the real views')",
+            with_error(p, e.patch_swd_mv_stderr)
         ),
         None => println!(
             "patch_swd_mv:              not computed: views of {} pixels are below its \
@@ -370,18 +399,24 @@ fn print_report(e: &Evaluation) {
         ),
     }
     println!(
-        "colour_swd:                {:.4}  (lower = colours closer to the real views')",
-        e.colour_swd
+        "colour_swd:                {}  (lower = colours closer to the real views')",
+        with_error(e.colour_swd, Some(e.colour_swd_stderr))
     );
     match e.floaters {
         Some(f) => println!(
-            "floaters:                  {f:.4}  (mean opacity where the real views are empty)"
+            "floaters:                  {}  (mean opacity where the real views are empty)",
+            with_error(f, e.floaters_stderr)
         ),
         None => println!("floaters:                  not computed: no real pixel is empty"),
     }
     println!(
-        "Diversity-MV:              {:.4}  (higher = more varied scenes)",
-        e.diversity_mv
+        "Diversity-MV:              {}  (higher = more varied scenes)",
+        with_error(e.diversity_mv, e.diversity_mv_stderr)
+    );
+    println!(
+        "                           (± one standard error over the {} scenes: their sampling \
+         noise, not a difference between runs)",
+        e.scenes
     );
     match e.sifid_mv {
         Some(s) => {
@@ -395,7 +430,7 @@ fn print_report(e: &Evaluation) {
 }
 
 /// One Markdown table, a row per model (as the paper's Table 1), "-" where a number was not
-/// computed.
+/// computed; the sample metrics with their standard errors over scenes.
 fn markdown_table(evaluations: &[Evaluation]) -> String {
     let number = |v: Option<f64>, digits: usize| match v {
         Some(v) => format!("{v:.digits$}"),
@@ -414,10 +449,12 @@ fn markdown_table(evaluations: &[Evaluation]) -> String {
             number(Some(e.volume_psnr), 2),
             number(e.held_out_psnr, 2),
             number(e.held_out_ssim, 4),
-            number(e.patch_swd_mv, 4),
-            number(Some(e.colour_swd), 4),
-            number(e.floaters, 4),
-            number(Some(e.diversity_mv), 4),
+            e.patch_swd_mv
+                .map_or("-".to_string(), |p| with_error(p, e.patch_swd_mv_stderr)),
+            with_error(e.colour_swd, Some(e.colour_swd_stderr)),
+            e.floaters
+                .map_or("-".to_string(), |f| with_error(f, e.floaters_stderr)),
+            with_error(e.diversity_mv, e.diversity_mv_stderr),
             number(e.sifid_mv, 4),
         ];
         table.push_str(&format!(
@@ -427,6 +464,14 @@ fn markdown_table(evaluations: &[Evaluation]) -> String {
         ));
     }
     table
+}
+
+/// A sample metric with four decimals and, when known, its standard error over scenes.
+fn with_error(value: f64, stderr: Option<f64>) -> String {
+    match stderr {
+        Some(stderr) => format!("{value:.4} ± {stderr:.4}"),
+        None => format!("{value:.4}"),
+    }
 }
 
 /// The run directory of `model` (the directory itself, or the one holding the checkpoint).

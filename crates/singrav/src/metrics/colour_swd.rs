@@ -31,11 +31,26 @@ use crate::error::Result;
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn colour_swd(generated: &[Tensor], real: &Tensor) -> Result<f64> {
+    Ok(super::mean(&colour_swd_per_scene(generated, real)?))
+}
+
+/// [`colour_swd`] of each scene on its own, averaged over its views (their mean is
+/// [`colour_swd`]).
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// let real = Tensor::full(0.5f32, (1, 3, 2, 2), &Device::Cpu)?;
+/// let grey = real.clone();
+/// let brighter = (&real + 0.1)?;
+/// let per_scene = singrav::metrics::colour_swd_per_scene(&[grey, brighter], &real)?;
+/// assert!(per_scene[0] < 1e-12 && (per_scene[1] - 0.1).abs() < 1e-6);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn colour_swd_per_scene(generated: &[Tensor], real: &Tensor) -> Result<Vec<f64>> {
     super::check_scenes(generated, real, 1)?;
     let axes = cube_axes(real.device())?;
     let views = real.dim(0)?;
     let pixels = |images: &Tensor, v: usize| -> Result<Tensor> {
-        // (3, H, W) -> (H W, 3): one point per pixel.
         Ok(images
             .get(v)?
             .to_dtype(DType::F64)?
@@ -44,19 +59,22 @@ pub fn colour_swd(generated: &[Tensor], real: &Tensor) -> Result<f64> {
             .contiguous()?)
     };
     let real_pixels: Vec<Tensor> = (0..views).map(|v| pixels(real, v)).collect::<Result<_>>()?;
-    let mut total = 0.0;
-    for scene in generated {
-        for (v, real_v) in real_pixels.iter().enumerate() {
-            let per_axis = sliced_wasserstein_per_projection(
-                &pixels(scene, v)?,
-                real_v,
-                &axes,
-                Metric::SquaredW2,
-            )?;
-            total += per_axis.mean_all()?.to_scalar::<f64>()?.sqrt();
-        }
-    }
-    Ok(total / (generated.len() * views) as f64)
+    generated
+        .iter()
+        .map(|scene| {
+            let mut total = 0.0;
+            for (v, real_v) in real_pixels.iter().enumerate() {
+                let per_axis = sliced_wasserstein_per_projection(
+                    &pixels(scene, v)?,
+                    real_v,
+                    &axes,
+                    Metric::SquaredW2,
+                )?;
+                total += per_axis.mean_all()?.to_scalar::<f64>()?.sqrt();
+            }
+            Ok(total / views as f64)
+        })
+        .collect()
 }
 
 /// The 13 symmetry axes of the cube as unit columns of a `(3, 13)` matrix: a spherical

@@ -21,28 +21,48 @@ use crate::error::{invalid, Result};
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn floaters(generated: &[Tensor], real_alpha: &Tensor) -> Result<Option<f64>> {
+    Ok(floaters_per_scene(generated, real_alpha)?.map(|per_scene| super::mean(&per_scene)))
+}
+
+/// [`floaters`] of each scene on its own (their mean is [`floaters`]): what
+/// [`Estimate::mean_of`](super::Estimate::mean_of) turns into a standard error over scenes.
+/// `None` when no real pixel has alpha exactly 0.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// let real = Tensor::new(&[[[[1.0f32, 0.0]]]], &Device::Cpu)?;
+/// let clear = real.clone();
+/// let hazy = Tensor::new(&[[[[1.0f32, 0.4]]]], &Device::Cpu)?;
+/// let per_scene = singrav::metrics::floaters_per_scene(&[clear, hazy], &real)?.unwrap();
+/// assert_eq!(per_scene, vec![0.0, 0.4f32 as f64]);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn floaters_per_scene(generated: &[Tensor], real_alpha: &Tensor) -> Result<Option<Vec<f64>>> {
     super::check_scenes(generated, real_alpha, 1)?;
     let sky = real_alpha.eq(0f64)?.to_dtype(DType::F64)?;
     let sky_pixels = sky.sum_all()?.to_scalar::<f64>()?;
     if sky_pixels == 0.0 {
         return Ok(None);
     }
-    let mut total = 0.0;
-    for (s, scene) in generated.iter().enumerate() {
-        let opacity = scene.to_dtype(DType::F64)?;
-        let (min, max) = (
-            opacity.min_all()?.to_scalar::<f64>()?,
-            opacity.max_all()?.to_scalar::<f64>()?,
-        );
-        if min < 0.0 || max > 1.0 + 1e-6 {
-            return Err(invalid(
-                "generated opacity",
-                format!("scene {s} has opacity in [{min}, {max}], expected values in [0, 1]"),
-            ));
-        }
-        total += (opacity * &sky)?.sum_all()?.to_scalar::<f64>()?;
-    }
-    Ok(Some(total / (sky_pixels * generated.len() as f64)))
+    let per_scene = generated
+        .iter()
+        .enumerate()
+        .map(|(s, scene)| {
+            let opacity = scene.to_dtype(DType::F64)?;
+            let (min, max) = (
+                opacity.min_all()?.to_scalar::<f64>()?,
+                opacity.max_all()?.to_scalar::<f64>()?,
+            );
+            if min < 0.0 || max > 1.0 + 1e-6 {
+                return Err(invalid(
+                    "generated opacity",
+                    format!("scene {s} has opacity in [{min}, {max}], expected values in [0, 1]"),
+                ));
+            }
+            Ok((opacity * &sky)?.sum_all()?.to_scalar::<f64>()? / sky_pixels)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Some(per_scene))
 }
 
 #[cfg(test)]

@@ -13,12 +13,16 @@
 //!   7 x 7 patch distributions of a Laplacian pyramid).
 //! - [`colour_swd`]: colour drift, the sliced Wasserstein distance between RGB distributions.
 //! - [`floaters`]: the mean opacity generated scenes put where the real views are empty.
+//! - [`Estimate`]: a metric over scenes with its standard error over scenes (per-scene values
+//!   from [`floaters_per_scene`], [`colour_swd_per_scene`], [`patch_swd_per_scene`]; a
+//!   jackknife for [`diversity_mv`]).
 //! - [`FeatureGaussian`]: the Fréchet distance between Gaussians fitted to feature sets, which
 //!   SIFID (and FID) is.
 
 mod colour_swd;
 mod depth;
 mod diversity;
+mod estimate;
 mod floaters;
 mod frechet;
 mod inception;
@@ -27,13 +31,16 @@ mod psnr;
 mod sifid;
 mod ssim;
 
-pub use colour_swd::colour_swd;
+pub use colour_swd::{colour_swd, colour_swd_per_scene};
 pub use depth::depth_rmse;
 pub use diversity::diversity_mv;
-pub use floaters::floaters;
+pub use estimate::Estimate;
+pub use floaters::{floaters, floaters_per_scene};
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
-pub use patch_swd::{patch_swd_mv, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED};
+pub use patch_swd::{
+    patch_swd_mv, patch_swd_per_scene, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED,
+};
 pub use psnr::{mean_psnr, psnr_per_view};
 pub use sifid::{sifid, sifid_mv};
 pub use ssim::{mean_ssim, ssim_per_view};
@@ -65,4 +72,9 @@ fn check_scenes(
         ));
     }
     Ok(())
+}
+
+/// The arithmetic mean of per-scene values (NaN for none; callers check their scenes first).
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
 }

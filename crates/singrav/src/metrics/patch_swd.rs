@@ -38,6 +38,21 @@ pub const PATCH_SWD_MIN_SIDE: usize = 25;
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn patch_swd_mv(generated: &[Tensor], real: &Tensor) -> Result<f64> {
+    Ok(super::mean(&patch_swd_per_scene(generated, real)?))
+}
+
+/// [`patch_swd_mv`] of each scene on its own, averaged over its views (their mean is
+/// [`patch_swd_mv`]; the same fixed directions for every scene).
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// let real = Tensor::rand(0f32, 1.0, (1, 3, 32, 32), &Device::Cpu)?;
+/// let per_scene = singrav::metrics::patch_swd_per_scene(&[real.clone(), (&real * 0.5)?], &real)?;
+/// assert_eq!(per_scene[0], 0.0);
+/// assert!(per_scene[1] > 0.0);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn patch_swd_per_scene(generated: &[Tensor], real: &Tensor) -> Result<Vec<f64>> {
     super::check_scenes(generated, real, 1)?;
     let pyramid = PatchPyramid::new(PatchPyramidConfig::default())?;
     let levels = pyramid.config().levels;
@@ -54,19 +69,23 @@ pub fn patch_swd_mv(generated: &[Tensor], real: &Tensor) -> Result<f64> {
         .collect::<Result<Vec<_>>>()?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(PATCH_SWD_SEED);
     let directions = loss.draw_projections(&targets[0], &mut rng)?;
-    let mut total = 0.0;
-    for scene in generated {
-        for (v, target) in targets.iter().enumerate() {
-            let value = loss.loss_with_projections(&scene.narrow(0, v, 1)?, target, &directions)?;
-            total += f64::from(
-                value
-                    .to_dtype(candle_core::DType::F32)?
-                    .to_scalar::<f32>()?,
-            )
-            .sqrt();
-        }
-    }
-    Ok(total / (generated.len() * views) as f64)
+    generated
+        .iter()
+        .map(|scene| {
+            let mut total = 0.0;
+            for (v, target) in targets.iter().enumerate() {
+                let value =
+                    loss.loss_with_projections(&scene.narrow(0, v, 1)?, target, &directions)?;
+                total += f64::from(
+                    value
+                        .to_dtype(candle_core::DType::F32)?
+                        .to_scalar::<f32>()?,
+                )
+                .sqrt();
+            }
+            Ok(total / views as f64)
+        })
+        .collect()
 }
 
 #[cfg(test)]
