@@ -257,17 +257,23 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     assert!(text.contains("trained model"), "{text}");
     assert_eq!(json(&held.join("config.json"))["holdout"], 3);
 
-    let text = ok(&volgen(&[
-        "eval",
-        path(&run),
-        path(&held),
-        "--dataset",
-        path(&data),
-        "--scenes",
-        "2",
-        "--views",
-        "2",
-    ]));
+    // Both runs in one evaluation, with `extra` flags.
+    let eval_both = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            path(&run),
+            path(&held),
+            "--dataset",
+            path(&data),
+            "--scenes",
+            "2",
+            "--views",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        ok(&volgen(&args))
+    };
+    let text = eval_both(&[]);
     // Frames 0 and 3 of 6 are held out; the reconstruction is seen from 2 of frames 1, 2, 4, 5.
     let report = json(&held.join("eval.json"));
     assert_eq!(report["holdout"], 3);
@@ -332,6 +338,34 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
             plain_report["reconstruction_psnr"].as_f64().unwrap()
         )
     );
+
+    // --mean ends the table with each number's mean over the runs and its standard error
+    // over them: for two values a and b, (a + b) / 2 and |a - b| / 2.
+    let text = eval_both(&["--mean"]);
+    let lines: Vec<&str> = text.lines().filter(|l| l.starts_with('|')).collect();
+    assert_eq!(lines.len(), 5, "{text}");
+    let mean_row = cells(lines[4]);
+    assert_eq!(mean_row[0], "mean ± s.e. of 2 runs");
+    let (a, b) = (
+        json(&run.join("eval.json"))["colour_swd"].as_f64().unwrap(),
+        json(&held.join("eval.json"))["colour_swd"]
+            .as_f64()
+            .unwrap(),
+    );
+    assert_eq!(
+        mean_row[8],
+        format!("{:.4} ± {:.4}", (a + b) / 2.0, (a - b).abs() / 2.0)
+    );
+    // Only the held-out run has held-out views: no mean.
+    assert_eq!(mean_row[5], "-");
+    let err = failure(&volgen(&[
+        "eval",
+        path(&run),
+        "--dataset",
+        path(&data),
+        "--mean",
+    ]));
+    assert!(err.contains("--mean needs at least 2 runs"), "{err}");
 
     // --out is for one run.
     let out = tmp.path().join("both.json");

@@ -61,6 +61,11 @@ pub struct EvalArgs {
     /// with a single run.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    /// With several runs of one setting (other seeds), end the table with a row of each
+    /// number's mean over the runs and its standard error over them: runs differ far more
+    /// than one evaluation's scenes do.
+    #[arg(long)]
+    mean: bool,
 }
 
 /// What `eval.json` holds. Infinite PSNRs (exact reconstructions) are written as null.
@@ -136,6 +141,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     );
     ensure!(args.views >= 1, "--views must be at least 1");
     ensure!(
+        !args.mean || args.models.len() >= 2,
+        "--mean needs at least 2 runs (seeds of one setting) to average, got {}",
+        args.models.len()
+    );
+    ensure!(
         args.out.is_none() || args.models.len() == 1,
         "--out names one file, for a single run; with several runs each writes eval.json in \
          its run directory"
@@ -167,7 +177,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         evaluations.push(evaluation);
     }
     if evaluations.len() > 1 {
-        print!("{}", markdown_table(&evaluations));
+        print!("{}", markdown_table(&evaluations, args.mean));
     }
     Ok(())
 }
@@ -390,7 +400,7 @@ fn print_report(e: &Evaluation) {
     match e.patch_swd_mv {
         Some(p) => println!(
             "patch_swd_mv:              {}  (lower = patches closer to the real views')",
-            with_error(p, e.patch_swd_mv_stderr)
+            cell(Some(p), e.patch_swd_mv_stderr, 4)
         ),
         None => println!(
             "patch_swd_mv:              not computed: views of {} pixels are below its \
@@ -400,18 +410,18 @@ fn print_report(e: &Evaluation) {
     }
     println!(
         "colour_swd:                {}  (lower = colours closer to the real views')",
-        with_error(e.colour_swd, Some(e.colour_swd_stderr))
+        cell(Some(e.colour_swd), Some(e.colour_swd_stderr), 4)
     );
     match e.floaters {
         Some(f) => println!(
             "floaters:                  {}  (mean opacity where the real views are empty)",
-            with_error(f, e.floaters_stderr)
+            cell(Some(f), e.floaters_stderr, 4)
         ),
         None => println!("floaters:                  not computed: no real pixel is empty"),
     }
     println!(
         "Diversity-MV:              {}  (higher = more varied scenes)",
-        with_error(e.diversity_mv, e.diversity_mv_stderr)
+        cell(Some(e.diversity_mv), e.diversity_mv_stderr, 4)
     );
     println!(
         "                           (± one standard error over the {} scenes: their sampling \
@@ -430,47 +440,74 @@ fn print_report(e: &Evaluation) {
 }
 
 /// One Markdown table, a row per model (as the paper's Table 1), "-" where a number was not
-/// computed; the sample metrics with their standard errors over scenes.
-fn markdown_table(evaluations: &[Evaluation]) -> String {
-    let number = |v: Option<f64>, digits: usize| match v {
-        Some(v) => format!("{v:.digits$}"),
-        None => "-".to_string(),
-    };
+/// computed; the sample metrics with their standard errors over scenes. With `mean`, a last row
+/// of each column's mean over the models and its standard error over them ("-" where a model
+/// lacks the number or it is infinite).
+fn markdown_table(evaluations: &[Evaluation], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
          patch SWD-MV | colour SWD | floaters | Diversity-MV | SIFID-MV |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
-        let cells = [
-            number(Some(e.reconstruction_psnr), 2),
-            number(Some(e.reconstruction_ssim), 4),
-            number(Some(e.reconstruction_depth_rmse), 4),
-            number(Some(e.volume_psnr), 2),
-            number(e.held_out_psnr, 2),
-            number(e.held_out_ssim, 4),
-            e.patch_swd_mv
-                .map_or("-".to_string(), |p| with_error(p, e.patch_swd_mv_stderr)),
-            with_error(e.colour_swd, Some(e.colour_swd_stderr)),
-            e.floaters
-                .map_or("-".to_string(), |f| with_error(f, e.floaters_stderr)),
-            with_error(e.diversity_mv, e.diversity_mv_stderr),
-            number(e.sifid_mv, 4),
-        ];
+        let cells: Vec<String> = columns(e)
+            .iter()
+            .map(|&(value, stderr, digits)| cell(value, stderr, digits))
+            .collect();
         table.push_str(&format!(
             "| {} | {} |\n",
             e.model.display(),
             cells.join(" | ")
         ));
     }
+    if mean {
+        let per_model: Vec<_> = evaluations.iter().map(columns).collect();
+        let cells: Vec<String> = (0..per_model[0].len())
+            .map(|column| {
+                let digits = per_model[0][column].2;
+                let values: Option<Vec<f64>> = per_model
+                    .iter()
+                    .map(|model| model[column].0.filter(|v| v.is_finite()))
+                    .collect();
+                match values.map(|v| Estimate::mean_of(&v)) {
+                    Some(Ok(e)) => cell(Some(e.value), Some(e.stderr), digits),
+                    _ => "-".to_string(),
+                }
+            })
+            .collect();
+        table.push_str(&format!(
+            "| mean ± s.e. of {} runs | {} |\n",
+            evaluations.len(),
+            cells.join(" | ")
+        ));
+    }
     table
 }
 
-/// A sample metric with four decimals and, when known, its standard error over scenes.
-fn with_error(value: f64, stderr: Option<f64>) -> String {
-    match stderr {
-        Some(stderr) => format!("{value:.4} ± {stderr:.4}"),
-        None => format!("{value:.4}"),
+/// The table's numbers of one model, in its column order: value, standard error over scenes
+/// (the sample metrics), decimals shown.
+fn columns(e: &Evaluation) -> [(Option<f64>, Option<f64>, usize); 11] {
+    [
+        (Some(e.reconstruction_psnr), None, 2),
+        (Some(e.reconstruction_ssim), None, 4),
+        (Some(e.reconstruction_depth_rmse), None, 4),
+        (Some(e.volume_psnr), None, 2),
+        (e.held_out_psnr, None, 2),
+        (e.held_out_ssim, None, 4),
+        (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
+        (Some(e.colour_swd), Some(e.colour_swd_stderr), 4),
+        (e.floaters, e.floaters_stderr, 4),
+        (Some(e.diversity_mv), e.diversity_mv_stderr, 4),
+        (e.sifid_mv, None, 4),
+    ]
+}
+
+/// A number with `digits` decimals and, when known, its standard error; "-" when not computed.
+fn cell(value: Option<f64>, stderr: Option<f64>, digits: usize) -> String {
+    match (value, stderr) {
+        (Some(value), Some(stderr)) => format!("{value:.digits$} ± {stderr:.digits$}"),
+        (Some(value), None) => format!("{value:.digits$}"),
+        (None, _) => "-".to_string(),
     }
 }
 
