@@ -51,6 +51,19 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
     // The VDB export reads back through an independent reader and matches the volume.
     let volume = RadianceVolume::load_safetensors(out.join("samples/scene_0.safetensors")).unwrap();
     assert_vdb_matches(&volume, &out.join("samples/scene_0.vdb"));
+    // So do its EXR slices (one per z slice, full floats), read back with the exr crate.
+    let slices =
+        RadianceVolume::read_exr_slices(out.join("samples/scene_0_exr"), "scene_0").unwrap();
+    assert_eq!(slices.dims(), volume.dims());
+    let largest_difference = (slices.tensor() - volume.tensor())
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    assert_eq!(largest_difference, 0.0, "full-float slices are exact");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["scale_seconds"].as_array().unwrap().len(), 3);

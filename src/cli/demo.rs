@@ -143,7 +143,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let cameras = dataset.level(size, size, model.device())?.cameras[..input_views].to_vec();
     let outputs = Outputs {
         vdb: cfg!(feature = "vdb"),
-        exr_slices: false,
+        exr_slices: cfg!(feature = "exr"),
     };
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let samples = sample_to_dir(
