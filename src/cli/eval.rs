@@ -267,12 +267,14 @@ fn evaluate(
         .map(|per_scene| Estimate::mean_of(&per_scene))
         .transpose()
         .context("floaters of the generated scenes")?;
-    let diversity = diversity_mv(&views, &real)?;
-    let diversity_stderr = (args.scenes >= 3)
-        .then(|| Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real)))
-        .transpose()
-        .context("Diversity-MV of the generated scenes")?
-        .map(|e| e.stderr);
+    // The jackknife computes Diversity-MV over all scenes too; below 3 scenes it has no error.
+    let (diversity, diversity_stderr) = if args.scenes >= 3 {
+        let estimate = Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real))
+            .context("Diversity-MV of the generated scenes")?;
+        (estimate.value, Some(estimate.stderr))
+    } else {
+        (diversity_mv(&views, &real)?, None)
+    };
 
     Ok(Evaluation {
         model: model_path.to_path_buf(),
