@@ -195,6 +195,12 @@ pub struct TrainConfig {
     /// the rest. 0 (runs made before it existed): z*_n moves from the first iteration.
     #[serde(default)]
     pub reconstruction_noise_from: f64,
+    /// The decay of an exponential moving average of each 3D scale's generator weights, updated
+    /// after every generator step; when the scale ends its generator keeps the average (Polyak
+    /// averaging of GAN weights, StyleGAN's `G_ema`), so the finer scales, V* and the samples
+    /// use it. 0 (SinGAN's training, and runs made before it existed): the last step's weights.
+    #[serde(default)]
+    pub generator_average: f64,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -543,6 +549,7 @@ impl TrainConfig {
             noise_skip: false,
             reconstruction_noise_final_lr: None,
             reconstruction_noise_from: 0.0,
+            generator_average: 0.0,
             sparse_from_scale: Some(SPARSE_FROM_SCALE),
             sparse_threshold: SPARSE_THRESHOLD,
             sparse_margin: SPARSE_MARGIN,
@@ -894,6 +901,15 @@ impl TrainConfig {
                 ),
             ));
         }
+        if !(0.0..1.0).contains(&self.generator_average) {
+            return Err(invalid(
+                "generator_average",
+                format!(
+                    "expected the weight average's decay in [0, 1) (0: off), got {}",
+                    self.generator_average
+                ),
+            ));
+        }
         if let Some(last) = self.reconstruction_noise_final_lr {
             if !(last > 0.0 && last.is_finite()) {
                 return Err(invalid(
@@ -1153,6 +1169,7 @@ mod tests {
             "noise_skip",
             "reconstruction_noise_final_lr",
             "reconstruction_noise_from",
+            "generator_average",
             "lambda_opacity_binary",
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
@@ -1175,6 +1192,7 @@ mod tests {
         assert!(!old.noise_skip);
         assert_eq!(old.reconstruction_noise_final_lr, None);
         assert_eq!(old.reconstruction_noise_from, 0.0);
+        assert_eq!(old.generator_average, 0.0);
         assert_eq!(old.lambda_opacity_binary, 0.0);
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);

@@ -1138,3 +1138,108 @@ fn optimised_reconstruction_noise_trains_is_saved_and_resumes() {
         .keys()
         .all(|name| name == "z_star" || !name.starts_with("z_star") && !name.starts_with("opt_z")));
 }
+
+/// A weight average (`generator_average > 0`) watches training without steering it: the raw
+/// weights of scale 1 are those of a run without it, and when the scale ends its generator
+/// takes the average, `d * (average before the last step) + (1 - d) * (last weights)`. The
+/// average is in mid-scale checkpoints and a killed run resumes to the uninterrupted tensors;
+/// a decay outside [0, 1) is refused naming the field.
+#[test]
+fn a_generator_weight_average_is_what_a_scale_keeps_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let decay = 0.5;
+    let config = TrainConfig {
+        generator_average: decay,
+        checkpoint_iterations: 1,
+        ..micro()
+    };
+    let last = config.scale_schedule(1).iterations;
+    // Killed right after the checkpoint of scale 1's second-to-last iteration.
+    let killed = tmp.path().join("killed");
+    let mut stop = |p: &Progress| match p.event {
+        Event::Checkpoint(_) if p.scale == 1 && p.iteration == last - 1 => Control::Stop,
+        _ => Control::Continue,
+    };
+    let stopped = train(
+        &config,
+        &data,
+        &killed,
+        &RunOptions::default(),
+        &Device::Cpu,
+        &mut stop,
+    );
+    assert!(matches!(stopped.unwrap(), TrainOutcome::Stopped));
+    let before_last = checkpoint_tensors(&killed);
+    let averaged = tmp.path().join("averaged");
+    run_to_end(&config, &data, &averaged);
+    let finished = checkpoint_tensors(&averaged);
+    let raw = tmp.path().join("raw");
+    run_to_end(
+        &TrainConfig {
+            checkpoint_iterations: 1,
+            ..micro()
+        },
+        &data,
+        &raw,
+    );
+    let raw = checkpoint_tensors(&raw);
+    let values = |t: &Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
+    let mut averaged_names = 0;
+    for (name, average) in before_last
+        .iter()
+        .filter(|(n, _)| n.starts_with("avg_g.1."))
+    {
+        let variable = format!("g1.{}", name.trim_start_matches("avg_g.1."));
+        let (kept, last_weights) = (values(&finished[&variable]), values(&raw[&variable]));
+        for ((k, a), w) in kept.iter().zip(values(average)).zip(last_weights) {
+            let expected = decay as f32 * a + (1.0 - decay as f32) * w;
+            assert!(
+                (k - expected).abs() <= 1e-6 * (1.0 + expected.abs()),
+                "{variable}"
+            );
+        }
+        averaged_names += 1;
+    }
+    assert!(
+        averaged_names > 0,
+        "no average of generator 1 in the mid-scale checkpoint"
+    );
+    // Scale 2 trains on the averaged scale 1, so it ends elsewhere.
+    assert_ne!(
+        values(&finished["g2.tail.weight"]),
+        values(&raw["g2.tail.weight"])
+    );
+    assert!(raw.keys().all(|name| !name.starts_with("avg_g.")));
+
+    killed_in_scale_2_resumes_to(
+        &TrainConfig {
+            checkpoint_iterations: 2,
+            ..config.clone()
+        },
+        &data,
+        &tmp.path().join("resumed"),
+        "avg_g.2.",
+        &checkpoint_tensors(&{
+            let whole = tmp.path().join("whole");
+            run_to_end(
+                &TrainConfig {
+                    checkpoint_iterations: 2,
+                    ..config.clone()
+                },
+                &data,
+                &whole,
+            );
+            whole
+        }),
+    );
+
+    for bad in [1.0, -0.1, f64::NAN] {
+        let config = TrainConfig {
+            generator_average: bad,
+            ..micro()
+        };
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains("generator_average"), "{message}");
+    }
+}

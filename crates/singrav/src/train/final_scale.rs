@@ -198,6 +198,7 @@ impl Stage for FinalScale<'_> {
             generator_opt: &mut self.opt,
             coarser_generators: &mut [],
             reconstruction_noise_opt: None,
+            generator_average: None,
         }
     }
 }

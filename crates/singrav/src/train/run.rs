@@ -21,7 +21,7 @@ use crate::dataset::Dataset;
 use crate::error::{invalid, Error, Result};
 use crate::model::{load_into, var_tensors, SinGrav};
 use crate::noise::step_rng;
-use crate::optim::Adam;
+use crate::optim::{Adam, WeightAverage};
 use crate::render::ViewRenderer;
 
 /// One scale's training, as the loop drives it.
@@ -39,6 +39,11 @@ pub(super) trait Stage {
         rng: &mut rand_chacha::ChaCha8Rng,
         count: usize,
     ) -> Result<Vec<Vec<Tensor>>>;
+    /// Ends the scale's training before its picture and checkpoint: generators that keep a
+    /// weight average take it.
+    fn finish(&mut self) -> Result<()> {
+        Ok(())
+    }
     /// The critics and the generator's optimiser (for checkpoints).
     fn parts(&mut self) -> StageParts<'_>;
 }
@@ -56,6 +61,9 @@ pub(super) struct StageParts<'a> {
     /// The optimiser of the scale's reconstruction noise z*_n (`opt_z.*`), when the run
     /// optimises it.
     pub reconstruction_noise_opt: Option<&'a mut Adam>,
+    /// The moving average of the training generators' weights (`avg_g.*`), when the run keeps
+    /// one.
+    pub generator_average: Option<&'a mut WeightAverage>,
 }
 
 impl StageParts<'_> {
@@ -98,6 +106,8 @@ const CRITIC_PREFIX: &str = "d.";
 const VOLUME_CRITIC_PREFIX: &str = "d3.";
 /// Checkpoint name prefix of the reconstruction noise's optimiser.
 const NOISE_OPT_PREFIX: &str = "opt_z.";
+/// Checkpoint name prefix of the generators' weight average.
+const AVERAGE_PREFIX: &str = "avg_g.";
 
 /// How a call to [`train`] ended.
 pub enum TrainOutcome {
@@ -327,6 +337,7 @@ pub fn train(
                 }
             }
         }
+        stage.finish()?;
         let picture = picture_path(run_dir, n);
         crate::io::create_dir(picture.parent().unwrap_or(run_dir))?;
         let rows = stage.picture_rows(
@@ -537,6 +548,9 @@ fn save(
             // It steps with the scale's generator too.
             tensors.extend(opt.state(NOISE_OPT_PREFIX).0);
         }
+        if let Some(average) = &parts.generator_average {
+            tensors.extend(average.state(AVERAGE_PREFIX));
+        }
         if let Some(critic) = &parts.volume_critic {
             // It steps with the 2D critic, so `d_steps` counts its steps too.
             tensors.extend(critic.opt.state("opt_d3.").0);
@@ -599,6 +613,9 @@ fn restore_stage(
     if let Some(opt) = parts.reconstruction_noise_opt {
         opt.restore(tensors, NOISE_OPT_PREFIX, g_steps)
             .map_err(fail)?;
+    }
+    if let Some(average) = parts.generator_average {
+        average.restore(tensors, AVERAGE_PREFIX).map_err(fail)?;
     }
     parts
         .critic

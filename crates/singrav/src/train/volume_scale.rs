@@ -20,7 +20,7 @@ use crate::config::TrainConfig;
 use crate::dataset::DatasetLevel;
 use crate::error::Result;
 use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
-use crate::optim::Adam;
+use crate::optim::{Adam, WeightAverage};
 use crate::render::ViewRenderer;
 
 /// A loss on the samples' rendered opacity against the real views' alpha (both `(V, 1, h, w)`).
@@ -66,6 +66,9 @@ pub(super) struct VolumeScale<'a> {
     /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
     /// `fitted`.
     volume_critic: Option<VolumeCritic>,
+    /// The moving average of the weights of every generator that trains (runs with
+    /// `generator_average > 0`), which they keep when the scale ends.
+    average: Option<WeightAverage>,
 }
 
 /// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
@@ -127,6 +130,9 @@ impl<'a> VolumeScale<'a> {
             })
             .transpose()?;
         let coarser = CoarserGenerator::for_scale(model, config, n)?;
+        let average = (config.generator_average > 0.0)
+            .then(|| trained_generator_average(model, n - coarser.len()..=n))
+            .transpose()?;
         let mut frozen_noise = model.reconstruction_noise(n)?;
         let reconstruction_noise = frozen_noise.split_off(n - 1 - coarser.len());
         let frozen_reconstruction = if frozen_noise.is_empty() {
@@ -149,6 +155,7 @@ impl<'a> VolumeScale<'a> {
             reconstruction_noise,
             fitted: None,
             volume_critic: None,
+            average,
         })
     }
 
@@ -396,6 +403,9 @@ impl Stage for VolumeScale<'_> {
             for coarser in &mut self.coarser {
                 coarser.opt.step(&grads)?;
             }
+            if let Some(average) = &mut self.average {
+                average.update()?;
+            }
         }
         let steps = self.config.g_steps as f32;
         losses.color = color_sum / steps;
@@ -436,6 +446,13 @@ impl Stage for VolumeScale<'_> {
         Ok(vec![row])
     }
 
+    fn finish(&mut self) -> Result<()> {
+        match &self.average {
+            Some(average) => average.apply(),
+            None => Ok(()),
+        }
+    }
+
     fn parts(&mut self) -> StageParts<'_> {
         StageParts {
             critic: &mut self.critic,
@@ -443,8 +460,29 @@ impl Stage for VolumeScale<'_> {
             generator_opt: &mut self.opt,
             coarser_generators: &mut self.coarser,
             reconstruction_noise_opt: self.noise_opt.as_mut(),
+            generator_average: self.average.as_mut(),
         }
     }
+}
+
+/// The weight average of the generators of `scales` (names `{scale}.{variable}`), with the
+/// configuration's decay.
+fn trained_generator_average(
+    model: &SinGrav,
+    scales: std::ops::RangeInclusive<usize>,
+) -> Result<WeightAverage> {
+    let mut params = Vec::new();
+    for scale in scales {
+        let vars = model.generator_vars(scale).ok_or_else(|| {
+            crate::error::invalid("scale", format!("generator {scale} is not built"))
+        })?;
+        params.extend(
+            named_vars(vars)
+                .into_iter()
+                .map(|(name, var)| (format!("{scale}.{name}"), var)),
+        );
+    }
+    WeightAverage::new(params, model.config().generator_average)
 }
 
 /// The RMSE between renderings of `volume` and the level's images over up to `max_views`
