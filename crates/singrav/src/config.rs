@@ -443,6 +443,18 @@ fn check_non_negative(field: &str, what: &str, value: f64) -> Result<()> {
     }
 }
 
+/// Errors unless `value` (a `what`) lies in [0, 1).
+fn check_fraction(field: &str, what: &str, value: f64) -> Result<()> {
+    if (0.0..1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(invalid(
+            field,
+            format!("expected {what} in [0, 1), got {value}"),
+        ))
+    }
+}
+
 /// The training recipe measured on `tiny` (docs/training.md), for a CPU preset with the sizes
 /// of `sized` and `iterations` per scale (a quarter of them reconstruction-only): learning rate
 /// 1e-3 (far fewer iterations than the paper, so larger steps), reconstruction weights
@@ -892,24 +904,16 @@ impl TrainConfig {
             "learning rate",
             self.reconstruction_noise_lr,
         )?;
-        if !(0.0..1.0).contains(&self.reconstruction_noise_from) {
-            return Err(invalid(
-                "reconstruction_noise_from",
-                format!(
-                    "expected a fraction of a scale's iterations in [0, 1), got {}",
-                    self.reconstruction_noise_from
-                ),
-            ));
-        }
-        if !(0.0..1.0).contains(&self.generator_average) {
-            return Err(invalid(
-                "generator_average",
-                format!(
-                    "expected the weight average's decay in [0, 1) (0: off), got {}",
-                    self.generator_average
-                ),
-            ));
-        }
+        check_fraction(
+            "reconstruction_noise_from",
+            "a fraction of a scale's iterations",
+            self.reconstruction_noise_from,
+        )?;
+        check_fraction(
+            "generator_average",
+            "the weight average's decay (0: off)",
+            self.generator_average,
+        )?;
         if let Some(last) = self.reconstruction_noise_final_lr {
             if !(last > 0.0 && last.is_finite()) {
                 return Err(invalid(

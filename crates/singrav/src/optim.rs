@@ -137,17 +137,7 @@ impl Adam {
         for (i, (name, var)) in self.params.iter().enumerate() {
             for (key, slot) in [("m", &mut self.first[i]), ("v", &mut self.second[i])] {
                 let full = format!("{prefix}{key}.{name}");
-                let saved = tensors
-                    .get(&full)
-                    .ok_or_else(|| format!("optimiser state `{full}` is missing"))?;
-                if saved.shape() != var.as_tensor().shape() {
-                    return Err(format!(
-                        "optimiser state `{full}` has shape {:?}, the variable {:?}",
-                        saved.shape(),
-                        var.as_tensor().shape()
-                    ));
-                }
-                *slot = saved.clone();
+                *slot = saved_like(tensors, &full, var, "optimiser state")?;
             }
         }
         self.steps = steps;
@@ -232,21 +222,30 @@ impl WeightAverage {
         prefix: &str,
     ) -> std::result::Result<(), String> {
         for ((name, var), slot) in self.params.iter().zip(&mut self.average) {
-            let full = format!("{prefix}{name}");
-            let saved = tensors
-                .get(&full)
-                .ok_or_else(|| format!("weight average `{full}` is missing"))?;
-            if saved.shape() != var.as_tensor().shape() {
-                return Err(format!(
-                    "weight average `{full}` has shape {:?}, the variable {:?}",
-                    saved.shape(),
-                    var.as_tensor().shape()
-                ));
-            }
-            *slot = saved.clone();
+            *slot = saved_like(tensors, &format!("{prefix}{name}"), var, "weight average")?;
         }
         Ok(())
     }
+}
+
+/// The saved tensor `name` (a `what` of `var`, for messages), which must have `var`'s shape.
+fn saved_like(
+    tensors: &HashMap<String, Tensor>,
+    name: &str,
+    var: &Var,
+    what: &str,
+) -> std::result::Result<Tensor, String> {
+    let saved = tensors
+        .get(name)
+        .ok_or_else(|| format!("{what} `{name}` is missing"))?;
+    if saved.shape() != var.as_tensor().shape() {
+        return Err(format!(
+            "{what} `{name}` has shape {:?}, the variable {:?}",
+            saved.shape(),
+            var.as_tensor().shape()
+        ));
+    }
+    Ok(saved.clone())
 }
 
 #[cfg(test)]

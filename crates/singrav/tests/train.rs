@@ -98,6 +98,25 @@ fn stop_at(scale: usize, iteration: usize) -> impl FnMut(&Progress) -> Control {
     }
 }
 
+/// Trains `config` into `dir` until `stop` stops it, as a kill would.
+fn run_until_stopped(
+    config: &TrainConfig,
+    data: &Dataset,
+    dir: &Path,
+    stop: &mut dyn FnMut(&Progress) -> Control,
+) {
+    let outcome = train(
+        config,
+        data,
+        dir,
+        &RunOptions::default(),
+        &Device::Cpu,
+        stop,
+    )
+    .unwrap();
+    assert!(matches!(outcome, TrainOutcome::Stopped));
+}
+
 /// Trains `config` into `dir` until it is killed in scale 2 after iteration 3 (its checkpoint
 /// every 2 iterations then holds iteration 2), asserts that checkpoint holds a tensor named
 /// `saved_prefix*`, resumes, and asserts the run ends with the tensors `finished`.
@@ -108,17 +127,7 @@ fn killed_in_scale_2_resumes_to(
     saved_prefix: &str,
     finished: &HashMap<String, Tensor>,
 ) {
-    let mut stop = stop_at(2, 3);
-    let outcome = train(
-        config,
-        data,
-        dir,
-        &RunOptions::default(),
-        &Device::Cpu,
-        &mut stop,
-    )
-    .unwrap();
-    assert!(matches!(outcome, TrainOutcome::Stopped));
+    run_until_stopped(config, data, dir, &mut stop_at(2, 3));
     assert!(checkpoint_tensors(dir)
         .keys()
         .any(|name| name.starts_with(saved_prefix)));
@@ -1161,15 +1170,7 @@ fn a_generator_weight_average_is_what_a_scale_keeps_and_resumes() {
         Event::Checkpoint(_) if p.scale == 1 && p.iteration == last - 1 => Control::Stop,
         _ => Control::Continue,
     };
-    let stopped = train(
-        &config,
-        &data,
-        &killed,
-        &RunOptions::default(),
-        &Device::Cpu,
-        &mut stop,
-    );
-    assert!(matches!(stopped.unwrap(), TrainOutcome::Stopped));
+    run_until_stopped(&config, &data, &killed, &mut stop);
     let before_last = checkpoint_tensors(&killed);
     let averaged = tmp.path().join("averaged");
     run_to_end(&config, &data, &averaged);
