@@ -444,7 +444,7 @@ fn check_non_negative(field: &str, what: &str, value: f64) -> Result<()> {
 }
 
 /// Errors unless `value` (a `what`) lies in [0, 1).
-fn check_fraction(field: &str, what: &str, value: f64) -> Result<()> {
+pub(crate) fn check_fraction(field: &str, what: &str, value: f64) -> Result<()> {
     if (0.0..1.0).contains(&value) {
         Ok(())
     } else {

@@ -172,12 +172,7 @@ impl WeightAverage {
     /// An average of `params` (names are used for checkpoints) starting at their values, with
     /// the weight `decay` (in [0, 1)) on the past at every update.
     pub fn new(params: Vec<(String, Var)>, decay: f64) -> Result<Self> {
-        if !(0.0..1.0).contains(&decay) {
-            return Err(crate::error::invalid(
-                "decay",
-                format!("expected a weight average's decay in [0, 1), got {decay}"),
-            ));
-        }
+        crate::config::check_fraction("decay", "a weight average's decay", decay)?;
         let average = params
             .iter()
             .map(|(_, v)| v.as_tensor().copy())
