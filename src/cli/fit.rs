@@ -70,6 +70,11 @@ pub struct FitArgs {
     /// SinGRAV run trained with `--set density_weighted_colour=true` renders.
     #[arg(long)]
     density_weighted_colour: bool,
+    /// Render with post-activated density (DVGO's rule: samples activate the interpolated raw
+    /// density, so edges can be sharper than a voxel), as a SinGRAV run trained with `--set
+    /// post_activation=true` renders. The saved volume stays physical per voxel.
+    #[arg(long, conflicts_with = "density_weighted_colour")]
+    post_activation: bool,
     /// Seed of the ray draws.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -80,6 +85,8 @@ pub struct FitArgs {
 struct FitReport<'a> {
     dataset: &'a Path,
     size: usize,
+    /// Whether the volume was fitted (and is scored) with post-activated density.
+    post_activation: bool,
     steps: usize,
     seconds: f64,
     live_fraction: f32,
@@ -123,11 +130,11 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let fitted = fit_with_progress(&dataset, &training, &config)?;
     let evaluation_start = std::time::Instant::now();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    let training_views = view_psnr(&fitted.volume, &dataset, &training, &config)?;
+    let training_views = view_psnr(&fitted.rendered, &dataset, &training, &config)?;
     let held_out_views = if held_out.is_empty() {
         Vec::new()
     } else {
-        view_psnr(&fitted.volume, &dataset, &held_out, &config)?
+        view_psnr(&fitted.rendered, &dataset, &held_out, &config)?
     };
     let training_psnr = mean(&training_views);
     let held_out_psnr = (!held_out.is_empty()).then(|| mean(&held_out_views));
@@ -151,6 +158,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let report = FitReport {
         dataset: &args.dataset,
         size: config.size,
+        post_activation: config.post_activation,
         steps: fitted.steps,
         seconds: fitted.seconds,
         live_fraction: fitted.live_fraction,
@@ -197,6 +205,7 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
         colour_interpolation: volrender::ColourInterpolation::density_weighted_if(
             args.density_weighted_colour,
         ),
+        post_activation: args.post_activation,
         ..defaults
     };
     config.validate()?;
@@ -261,7 +270,7 @@ fn write_outputs(
         .collect();
     let views = dataset.subset(&shown)?;
     let level = views.level(views.width(), views.height(), &candle_core::Device::Cpu)?;
-    let rendered = render_views(&fitted.volume, &level.cameras, config)?;
+    let rendered = render_views(&fitted.rendered, &level.cameras, config)?;
     let row = |t: &candle_core::Tensor| -> Result<Vec<candle_core::Tensor>> {
         Ok((0..shown.len())
             .map(|i| t.get(i))

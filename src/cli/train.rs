@@ -266,6 +266,7 @@ fn fit_for_training(
         use_depth: config.use_depth,
         seed: config.seed,
         colour_interpolation: config.colour_interpolation(),
+        post_activation: config.post_activation,
         budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
         // In the scene's coordinates, over the model's cube there.
         aabb: config

@@ -103,6 +103,27 @@ impl Activation {
 
     /// Applies the activation to a raw `(C, D, H, W)` or `(N, C, D, H, W)` tensor with C >= 4.
     pub fn apply(&self, raw: &Tensor) -> Result<Tensor> {
+        self.apply_parts(raw, true)
+    }
+
+    /// Applies the colour half only: channel 0 stays raw density, for a renderer that
+    /// interpolates raw density and activates it per sample (volrender's
+    /// `DensityInterpolation::PostActivated` with this activation's scale and shift).
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use radiance_volume::Activation;
+    /// let raw = Tensor::new(&[-3f32, 0.0, 0.0, 0.0], &Device::Cpu)?.reshape((4, 1, 1, 1))?;
+    /// let v: Vec<f32> = Activation::default().apply_colour(&raw)?.flatten_all()?.to_vec1()?;
+    /// assert_eq!(v, [-3.0, 0.5, 0.5, 0.5]);
+    /// # Ok::<(), candle_core::Error>(())
+    /// ```
+    pub fn apply_colour(&self, raw: &Tensor) -> Result<Tensor> {
+        self.apply_parts(raw, false)
+    }
+
+    /// [`Activation::apply`], with channel 0 left raw unless `density`.
+    fn apply_parts(&self, raw: &Tensor, density: bool) -> Result<Tensor> {
         let rank = raw.rank();
         if rank != 4 && rank != 5 {
             candle_core::bail!(
@@ -117,8 +138,13 @@ impl Activation {
                 "activation expects at least 4 channels (sigma, r, g, b), got {channels}"
             );
         }
-        let sigma = softplus(&(raw.narrow(channel_dim, 0, 1)? + f64::from(self.density_shift))?)?;
-        let sigma = (sigma * f64::from(self.density_scale))?;
+        let raw_density = raw.narrow(channel_dim, 0, 1)?;
+        let sigma = if density {
+            let sigma = softplus(&(raw_density + f64::from(self.density_shift))?)?;
+            (sigma * f64::from(self.density_scale))?
+        } else {
+            raw_density
+        };
         let rgb = sigmoid(&raw.narrow(channel_dim, 1, 3)?)?;
         let mut parts = vec![sigma, rgb];
         if channels > 4 {

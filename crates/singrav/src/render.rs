@@ -2,7 +2,7 @@
 
 use candle_core::{Device, Tensor};
 use radiance_volume::Activation;
-use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+use volrender::{render, Camera, DensityInterpolation, Rays, RenderConfig, Sampler};
 
 use crate::config::TrainConfig;
 use crate::error::{invalid, Result};
@@ -18,14 +18,15 @@ pub struct ViewRenderer {
 
 impl ViewRenderer {
     /// The renderer of training runs with `config`: `samples` uniform samples per ray, the
-    /// configured background and colour interpolation, and depth divided by `depth_norm` (so
+    /// configured background, colour interpolation and density rule, and depth divided by `depth_norm` (so
     /// it is about 1 at the far side of the box) when `with_depth`.
     pub fn new(config: &TrainConfig, samples: usize, depth_norm: f32, with_depth: bool) -> Self {
         let render = RenderConfig::default()
             .with_sampler(Sampler::Uniform { samples })
             .with_background(config.background)
             .with_depth(with_depth)
-            .with_colour_interpolation(config.colour_interpolation());
+            .with_colour_interpolation(config.colour_interpolation())
+            .with_density(config.density_interpolation());
         Self {
             activation: config.activation(),
             config: render,
@@ -94,10 +95,13 @@ impl ViewRenderer {
         let rays = Rays::new(origins, dirs)?;
         let device = raw.device().clone();
         // The render op runs on the CPU; on another device the volume moves there and back.
-        let physical = self
-            .activation
-            .apply(&raw.squeeze(0)?)?
-            .to_device(&Device::Cpu)?;
+        // A post-activating renderer takes raw density and activates it per sample.
+        let raw = raw.squeeze(0)?;
+        let physical = match config.density {
+            DensityInterpolation::Physical => self.activation.apply(&raw)?,
+            DensityInterpolation::PostActivated { .. } => self.activation.apply_colour(&raw)?,
+        }
+        .to_device(&Device::Cpu)?;
         let out = render(&physical, &rays, &config)?;
         let views = cameras.len();
         let rgb = out

@@ -7,7 +7,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use radiance_volume::{Aabb, RadianceVolume};
-use volrender::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
+use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
 
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
 use crate::error::{Error, Result};
@@ -139,6 +139,47 @@ impl SinGrav {
         let rest = volume.narrow(0, 1, volume.dim(0)? - 1)?;
         let volume = Tensor::cat(&[&density, &rest], 0)?;
         Ok(RadianceVolume::new(volume, bounds.cube())?)
+    }
+
+    /// A raw volume `(1, 4, s, s, s)` as a renderer outside the model takes it, in the scene's
+    /// coordinates, with the density rule to render it by: [`SinGrav::to_physical`] and
+    /// physical density; or, for a run trained with
+    /// [`TrainConfig::post_activation`](crate::TrainConfig::post_activation), the same with raw
+    /// density in channel 0 and the post-activation that renders it as the model does (its
+    /// scale divided by the bounds' half side, as `to_physical` divides density).
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig {
+    ///     post_activation: true,
+    ///     ..singrav::TrainConfig::preset("micro")?
+    /// };
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
+    /// let raw = (Tensor::ones((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)? * -2.0)?;
+    /// let (volume, density) = model.to_rendered(&raw)?;
+    /// assert_eq!(density.post_activation(), Some([config.density_scale, config.density_shift]));
+    /// // Density stays raw (volrender activates it per sample), colour is physical.
+    /// let values: Vec<f32> = volume.tensor().flatten_all()?.to_vec1()?;
+    /// assert_eq!((values[0], values[27]), (-2.0, 1.0 / (1.0 + 2f32.exp())));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn to_rendered(&self, raw: &Tensor) -> Result<(RadianceVolume, DensityInterpolation)> {
+        let config = self.config();
+        if !config.post_activation {
+            return Ok((self.to_physical(raw)?, DensityInterpolation::Physical));
+        }
+        let volume = config.activation().apply_colour(&raw.squeeze(0)?)?;
+        let (aabb, half_side) = match config.bounds {
+            Some(bounds) => (bounds.cube(), bounds.half_side()),
+            None => (Aabb::CUBE, 1.0),
+        };
+        let density = DensityInterpolation::PostActivated {
+            scale: config.density_scale / half_side,
+            shift: config.density_shift,
+        };
+        Ok((RadianceVolume::new(volume, aabb)?, density))
     }
 
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized

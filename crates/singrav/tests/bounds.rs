@@ -136,19 +136,33 @@ fn boxes_that_cannot_hold_the_scene_are_refused() {
     }
 }
 
-#[test]
-fn volumes_of_a_run_with_bounds_sit_on_its_cube_with_density_in_scene_units() {
-    use rand::SeedableRng;
-    let plain = singrav::TrainConfig::preset("micro").unwrap();
+/// The `micro` preset (rendering with post-activated density or not), the moved box, and the
+/// preset told that box.
+fn micro_and_placed(
+    post_activation: bool,
+) -> (singrav::TrainConfig, SceneBounds, singrav::TrainConfig) {
+    let plain = singrav::TrainConfig {
+        post_activation,
+        ..singrav::TrainConfig::preset("micro").unwrap()
+    };
     let bounds = moved_box(-1.0, 0.6);
     let placed = singrav::TrainConfig {
         bounds: Some(bounds),
         ..plain.clone()
     };
-    let model = |c| {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-        singrav::SinGrav::new(c, &Device::Cpu, &mut rng).unwrap()
-    };
+    (plain, bounds, placed)
+}
+
+/// An untrained model of `config` (its volumes come from the tests' raw tensors).
+fn model(config: &singrav::TrainConfig) -> singrav::SinGrav {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    singrav::SinGrav::new(config, &Device::Cpu, &mut rng).unwrap()
+}
+
+#[test]
+fn volumes_of_a_run_with_bounds_sit_on_its_cube_with_density_in_scene_units() {
+    let (plain, bounds, placed) = micro_and_placed(false);
     let raw = Tensor::randn(0f32, 2.0, (1, 4, 5, 5, 5), &Device::Cpu).unwrap();
     let a = model(&plain).to_physical(&raw).unwrap();
     let b = model(&placed).to_physical(&raw).unwrap();
@@ -161,4 +175,62 @@ fn volumes_of_a_run_with_bounds_sit_on_its_cube_with_density_in_scene_units() {
         assert!((x / 2.0 - y).abs() <= 1e-6 * x.abs(), "{x} vs {y}");
     }
     assert_eq!(values(&a.rgb().unwrap()), values(&b.rgb().unwrap()));
+}
+
+/// A run trained with post-activated density hands out its volumes (`to_rendered`) so that
+/// volrender, told the density rule that comes with them, renders them as the model's own
+/// renderer does: in the model's cube, and in the scene's coordinates of a run with bounds
+/// (where the rule's scale is divided by the half side, as `to_physical` divides density).
+/// What `volgen eval` scores as V*'s volume is therefore what the model renders.
+#[test]
+fn post_activated_volumes_render_outside_the_model_as_inside() {
+    use singrav::render::ViewRenderer;
+    use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+    let (plain, bounds, placed) = micro_and_placed(true);
+    // Raw densities around the activation's knee (shift -4), where interpolating raw and
+    // physical values differ most.
+    let raw = (Tensor::randn(0f32, 3.0, (1, 4, 6, 6, 6), &Device::Cpu).unwrap() + 4.0).unwrap();
+    let samples = 48;
+    let camera =
+        |eye: Vec3, target: Vec3| Camera::look_at(eye, target, Vec3::Z, 8, 8, 0.7).unwrap();
+    let (eye, target) = (Vec3::new(0.4, -3.2, 1.1), Vec3::new(0.0, 0.1, -0.2));
+    let inside = ViewRenderer::new(&plain, samples, 1.0, false)
+        .with_opacity(true)
+        .render_all(&raw, &[&camera(eye, target)])
+        .unwrap();
+    let (inside_rgb, inside_opacity) = (values(&inside.rgb), values(&inside.opacity.unwrap()));
+    assert!(inside_opacity.iter().any(|&a| a > 0.1 && a < 0.9));
+    let cube = bounds.cube();
+    let centre = (cube.min + cube.max) / 2.0;
+    let half = bounds.half_side();
+    for (config, cam) in [
+        (&plain, camera(eye, target)),
+        (&placed, camera(centre + half * eye, centre + half * target)),
+    ] {
+        let (volume, density) = model(config).to_rendered(&raw).unwrap();
+        let cfg = RenderConfig::default()
+            .with_sampler(Sampler::Uniform { samples })
+            .with_background(config.background)
+            .with_opacity(true)
+            .with_aabb(volume.aabb())
+            .with_density(density);
+        let out = render(volume.tensor(), &Rays::from_camera(&cam), &cfg).unwrap();
+        // (V, 3, h, w) against (R, 3): compare channel by channel.
+        let rgb = values(&out.rgb.t().unwrap().contiguous().unwrap());
+        for (a, b) in rgb.iter().zip(&inside_rgb) {
+            assert!((a - b).abs() < 1e-4, "colour {a} vs {b}");
+        }
+        for (a, b) in values(&out.opacity.unwrap()).iter().zip(&inside_opacity) {
+            assert!((a - b).abs() < 1e-4, "opacity {a} vs {b}");
+        }
+    }
+    // A run rendering physical density hands out its physical volume.
+    let physical = singrav::TrainConfig {
+        post_activation: false,
+        ..plain.clone()
+    };
+    let (volume, density) = model(&physical).to_rendered(&raw).unwrap();
+    assert_eq!(density, volrender::DensityInterpolation::Physical);
+    let want = model(&physical).to_physical(&raw).unwrap();
+    assert_eq!(values(volume.tensor()), values(want.tensor()));
 }

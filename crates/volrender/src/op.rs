@@ -21,7 +21,9 @@ use crate::buffer_pool::{self, Pooled};
 use crate::config::{RenderConfig, Sampler, MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE};
 use crate::empty_space::{empty_blocks, CellDistances};
 use crate::error::{invalid, Error, Result};
-use crate::kernel::{GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED};
+use crate::kernel::{
+    softplus_and_slope, GridSpec, Isa, OccView, Params, RayKernel, Real, VolumeView, PACKED,
+};
 use crate::rays::Rays;
 /// The most gradient buffers the backward allocates per volume.
 pub(crate) const BLOCKS: usize = 4;
@@ -41,11 +43,13 @@ pub struct RenderOutput {
 }
 
 /// Renders a physical volume `(C, D, H, W)` (C >= 4: sigma, r, g, b, further channels ignored;
-/// f32 or f64, on the CPU) along `rays`. Differentiable with respect to the volume.
+/// f32 or f64, on the CPU) along `rays`. Differentiable with respect to the volume. With
+/// [`DensityInterpolation::PostActivated`](crate::DensityInterpolation) channel 0 holds raw
+/// density instead, activated at every sample.
 ///
-/// Errors: bad options, a wrong shape, NaN or infinite values, or negative density (the
-/// renderer takes physical volumes, sigma >= 0; values are checked on every call, fused with
-/// the copy the kernel reads from).
+/// Errors: bad options, a wrong shape, NaN or infinite values, or negative density (unless
+/// post-activated; values are checked on every call, fused with the copy the kernel reads
+/// from).
 ///
 /// ```
 /// use candle_core::{Device, Tensor, Var};
@@ -148,8 +152,14 @@ pub fn render_batch(
     }
     let dims = GridDims::new(d, h, w);
     let occupancy = if cfg.skip_empty {
+        // The occupancy grid is of physical density, so raw density is activated first (with
+        // the kernel's own function, so that what it calls empty the kernel renders empty).
+        let physical = match cfg.density.post_activation() {
+            Some(activation) => with_activated_density(volumes, activation)?,
+            None => volumes.clone(),
+        };
         (0..n)
-            .map(|i| CellDistances::build(&volumes.get(i)?, cfg))
+            .map(|i| CellDistances::build(&physical.get(i)?, cfg))
             .collect::<Result<Vec<_>>>()?
     } else {
         Vec::new()
@@ -161,12 +171,7 @@ pub fn render_batch(
         DType::F64 => volumes.apply_op1(CompositeOp::<f64>::new(
             volumes, dims, rays, cfg, occupancy,
         )?)?,
-        other => {
-            return Err(Error::Unsupported {
-                what: "dtype",
-                why: format!("the renderer takes f32 or f64 volumes, got {other:?}").into(),
-            })
-        }
+        other => return Err(unsupported_dtype(other)),
     };
     let mut start = 0;
     rays.iter()
@@ -181,6 +186,39 @@ pub fn render_batch(
             })
         })
         .collect()
+}
+
+/// The error for volumes of a dtype the kernel does not run in.
+fn unsupported_dtype(dtype: DType) -> Error {
+    Error::Unsupported {
+        what: "dtype",
+        why: format!("the renderer takes f32 or f64 volumes, got {dtype:?}").into(),
+    }
+}
+
+/// `volumes` with channel 0 replaced by `scale * softplus(channel 0 + shift)`, computed as the
+/// kernel computes a sample's post-activated density.
+fn with_activated_density(volumes: &Tensor, [scale, shift]: [f32; 2]) -> Result<Tensor> {
+    fn activate<T: Real + WithDType>(raw: &Tensor, scale: f32, shift: f32) -> Result<Tensor> {
+        let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
+        let values: Vec<T> = raw.flatten_all()?.to_vec1()?;
+        let sigma = values
+            .into_par_iter()
+            .map(|x| scale * softplus_and_slope(x + shift).0)
+            .collect();
+        Ok(Tensor::from_vec(sigma, raw.shape(), raw.device())?)
+    }
+    let channels = volumes.dim(1)?;
+    let raw = volumes.narrow(1, 0, 1)?;
+    let sigma = match volumes.dtype() {
+        DType::F32 => activate::<f32>(&raw, scale, shift)?,
+        DType::F64 => activate::<f64>(&raw, scale, shift)?,
+        other => return Err(unsupported_dtype(other)),
+    };
+    Ok(Tensor::cat(
+        &[&sigma, &volumes.narrow(1, 1, channels - 1)?],
+        1,
+    )?)
 }
 
 /// The render op: interleaved copies of the volumes (validated), rays and options.
@@ -220,14 +258,32 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
         let values = &T::cpu_storage_as_slice(cpu)?[start..end];
         let density_weighted = cfg.colour_interpolation.is_density_weighted();
-        let volumes = interleave(values, rays.len(), channels, dims, density_weighted)?;
+        let post_activation = cfg.density.post_activation();
+        let volumes = interleave(
+            values,
+            rays.len(),
+            channels,
+            dims,
+            density_weighted,
+            post_activation.is_some(),
+        )?;
         let voxels = dims.voxel_count();
         let empty_blocks = occupancy
             .iter()
             .enumerate()
             .map(|(b, cells)| {
-                let sigma = &values[b * channels * voxels..][..voxels];
-                empty_blocks(sigma, dims, cells)
+                let density = &values[b * channels * voxels..][..voxels];
+                match post_activation {
+                    None => empty_blocks(density, dims, cells),
+                    Some([scale, shift]) => {
+                        let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
+                        let sigma: Vec<T> = density
+                            .par_iter()
+                            .map(|&x| scale * softplus_and_slope(x + shift).0)
+                            .collect();
+                        empty_blocks(&sigma, dims, cells)
+                    }
+                }
             })
             .collect();
         Ok(Self {
@@ -256,6 +312,11 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
                 data: &self.volumes[b],
                 n: self.grid.n,
                 density_weighted: self.cfg.colour_interpolation.is_density_weighted(),
+                post_activation: self
+                    .cfg
+                    .density
+                    .post_activation()
+                    .map(|a| a.map(|x| T::of(f64::from(x)))),
             },
             occupancy: self.occupancy.get(b).map(|o| OccView {
                 distance: &o.distance,
@@ -364,23 +425,26 @@ impl<T: Pooled> Drop for CompositeOp<T> {
 
 /// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`
 /// per voxel (premultiplied, `[sigma, sigma r, sigma g, sigma b]`, when `density_weighted`),
-/// checking in the same pass that every value is finite, every density >= 0 and every
-/// premultiplied colour finite.
+/// checking in the same pass that every value is finite, every density >= 0 (with
+/// `raw_density`, at most [`MAX_VOLUME_VALUE`] in magnitude instead) and every premultiplied
+/// colour finite.
 fn interleave<T: Pooled>(
     values: &[T],
     n: usize,
     channels: usize,
     dims: GridDims,
     density_weighted: bool,
+    raw_density: bool,
 ) -> Result<Vec<Vec<[T; 4]>>> {
     /// Voxels per parallel task.
     const CHUNK: usize = 4096;
     let voxels = dims.voxel_count();
     let limit = T::of(f64::from(MAX_VOLUME_VALUE));
-    // Density may be any finite value >= 0 (the kernel is exact up to f32::MAX); colours are
-    // bounded so that their products with segment lengths stay finite in the backward pass.
+    // Density may be any finite value >= 0 (the kernel is exact up to f32::MAX); colours, and
+    // raw densities whose activation is linear above its knee, are bounded so that their
+    // products with segment lengths stay finite in the backward pass.
     let value_ok = |c: usize, x: T| {
-        if c == 0 {
+        if c == 0 && !raw_density {
             x.is_finite() && x >= T::zero()
         } else {
             x.abs() <= limit
@@ -445,9 +509,14 @@ fn interleave<T: Pooled>(
                 return Err(Error::InvalidVolume {
                     count,
                     first,
-                    why: "density (channel 0) must be finite and >= 0, colours finite and at \
-                          most 1e10 in magnitude, and with density-weighted colour their \
-                          products finite",
+                    why: if raw_density {
+                        "raw density (channel 0, post-activated) and colours must be finite \
+                         and at most 1e10 in magnitude"
+                    } else {
+                        "density (channel 0) must be finite and >= 0, colours finite and at \
+                         most 1e10 in magnitude, and with density-weighted colour their \
+                         products finite"
+                    },
                 });
             }
             Ok(data)

@@ -17,7 +17,7 @@ use crate::op::{grid_spec, RenderOutput};
 use crate::rays::Rays;
 
 /// Renders `(C, D, H, W)` along `rays` with candle ops; supports the `Uniform` and `UniformLeft`
-/// samplers, both colour interpolations, the background and both extra outputs (always
+/// samplers, both colour interpolations, both density rules, the background and both extra outputs (always
 /// returned), but neither early termination nor skipping (they do not change its result when
 /// `epsilon` is 0).
 ///
@@ -96,7 +96,20 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
         .reshape((4, r * m, 8))?
         .sum(2)?
         .reshape((4, r, m))?;
-    let sigma = values.get(0)?;
+    let mut sigma = values.get(0)?;
+    if let Some([scale, shift]) = cfg.density.post_activation() {
+        // Samples outside the box have all-zero corner weights and hold no matter, activated
+        // or not.
+        let inside = weights
+            .reshape((r * m, 8))?
+            .sum(1)?
+            .gt(0.5)?
+            .to_dtype(dtype)?
+            .reshape((r, m))?;
+        let x = (sigma + f64::from(shift))?;
+        let softplus = (x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?)?;
+        sigma = ((softplus * f64::from(scale))? * inside)?;
+    }
     let mut rgb = values.narrow(0, 1, 3)?;
     if density_weighted {
         // The kernel's rule: colour P / sigma, 0 where sigma <= 1e-30.

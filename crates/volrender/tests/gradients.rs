@@ -10,7 +10,8 @@ use candle_core::{DType, Device, Tensor, Var};
 use proptest::prelude::*;
 use volrender::reference::render_reference;
 use volrender::{
-    render, render_batch, ColourInterpolation, Rays, RenderConfig, RenderOutput, Sampler,
+    render, render_batch, ColourInterpolation, DensityInterpolation, Rays, RenderConfig,
+    RenderOutput, Sampler,
 };
 
 use common::{mixed_rays, random_volume, rng, values};
@@ -58,6 +59,20 @@ fn check_fd(vol: &Tensor, f: impl Fn(&Tensor) -> f64, analytic: &[f64]) {
     }
 }
 
+/// The colour and density rules by number: 0 the paper's, 1 density-weighted colour, 2
+/// post-activated density (whose raw values then straddle the activation's knee: the random
+/// volumes' densities are >= 0 and the shift is -2).
+fn with_rule(cfg: RenderConfig, rule: u8) -> RenderConfig {
+    match rule {
+        0 => cfg,
+        1 => cfg.with_colour_interpolation(ColourInterpolation::DensityWeighted),
+        _ => cfg.with_density(DensityInterpolation::PostActivated {
+            scale: 1.5,
+            shift: -2.0,
+        }),
+    }
+}
+
 fn sampler(kind: u8, n: usize) -> Sampler {
     match kind {
         0 => Sampler::Uniform { samples: n },
@@ -74,16 +89,16 @@ proptest! {
     #[test]
     fn backward_matches_finite_differences(
         d in 1usize..4, h in 1usize..4, w in 1usize..4, seed in any::<u64>(),
-        samples in 1usize..10, kind in 0u8..3, background in any::<bool>(), weighted in any::<bool>(),
+        samples in 1usize..10, kind in 0u8..3, background in any::<bool>(), rule in 0u8..3,
     ) {
         let mut r = rng(seed);
         let vol = random_volume(&mut r, [d, h, w], 4.0, DType::F64);
         let rays = mixed_rays(&mut r, 2);
-        let mut cfg = RenderConfig::default()
+        let cfg = RenderConfig::default()
             .with_sampler(sampler(kind, samples))
             .with_depth(true)
-            .with_opacity(true)
-            .with_colour_interpolation(ColourInterpolation::density_weighted_if(weighted));
+            .with_opacity(true);
+        let mut cfg = with_rule(cfg, rule);
         if background {
             cfg = cfg.with_background([0.3, 0.9, 0.1]);
         }
@@ -113,15 +128,15 @@ proptest! {
     }
 
     /// The fast kernel and the candle-ops reference agree on values and gradients (f64), with
-    /// both colour interpolations.
+    /// both colour interpolations and both density rules.
     #[test]
-    fn kernel_matches_reference(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>(), weighted in any::<bool>()) {
+    fn kernel_matches_reference(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>(), rule in 0u8..3) {
         let mut r = rng(seed);
         let vol = random_volume(&mut r, [3, 4, 2], 5.0, DType::F64);
         let rays = mixed_rays(&mut r, 4);
         let s = if left { Sampler::UniformLeft { samples } } else { Sampler::Uniform { samples } };
-        let cfg = RenderConfig::default().with_sampler(s).with_depth(true).with_opacity(true).with_background([1.0, 0.5, 0.0])
-            .with_colour_interpolation(ColourInterpolation::density_weighted_if(weighted));
+        let cfg = RenderConfig::default().with_sampler(s).with_depth(true).with_opacity(true).with_background([1.0, 0.5, 0.0]);
+        let cfg = with_rule(cfg, rule);
         let weights = loss_weights(rays.len(), seed);
         let var = Var::from_tensor(&vol).unwrap();
         let fast = render(var.as_tensor(), &rays, &cfg).unwrap();

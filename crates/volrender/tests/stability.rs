@@ -245,3 +245,74 @@ fn scales_whose_gradients_would_overflow_are_refused_and_the_largest_accepted_st
         );
     }
 }
+
+/// Post-activated density takes raw values of either sign (the physical rule refuses -1), still
+/// refuses NaN and values beyond the bound, keeps outputs and gradients finite at the bound's
+/// extremes (exactly empty far below the knee), and refuses options it cannot honour by name.
+#[test]
+fn post_activated_density_takes_raw_values_and_refuses_bad_options() {
+    use volrender::{ColourInterpolation, DensityInterpolation};
+    let rays = mixed_rays(&mut rng(4), 0);
+    let post = DensityInterpolation::PostActivated {
+        scale: 25.0,
+        shift: -4.0,
+    };
+    let cfg = RenderConfig::default()
+        .with_density(post)
+        .with_opacity(true)
+        .with_depth(true);
+    let with_density = |sigma: f32| {
+        let base: Vec<f32> = constant_volume((2, 3, 4), 0.5, DType::F32)
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let mut v = base;
+        v[..24].fill(sigma);
+        Tensor::from_vec(v, (4, 2, 3, 4), &Device::Cpu).unwrap()
+    };
+    assert!(render(&with_density(-1.0), &rays, &RenderConfig::default()).is_err());
+    for raw in [-1.0, -1e10, 1e10, 0.0] {
+        let var = Var::from_tensor(&with_density(raw)).unwrap();
+        for skip in [false, true] {
+            let out = render(var.as_tensor(), &rays, &cfg.with_skip_empty(skip)).unwrap();
+            let opacity = values(out.opacity.as_ref().unwrap());
+            assert!(opacity.iter().all(|a| (0.0..=1.0).contains(a)), "{raw}");
+            if raw == -1e10 {
+                assert!(
+                    opacity.iter().all(|&a| a == 0.0),
+                    "far below the knee is empty"
+                );
+            }
+            let grads = (out.rgb.sum_all().unwrap() + out.depth.unwrap().sum_all().unwrap())
+                .unwrap()
+                .backward()
+                .unwrap();
+            let g = values(grads.get(&var).unwrap());
+            assert!(g.iter().all(|x| x.is_finite()), "{raw}: {g:?}");
+        }
+    }
+    for (raw, what) in [(f32::NAN, "NaN"), (2e10, "20000000000")] {
+        let err = render(&with_density(raw), &rays, &cfg)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(what) && err.contains("raw density"), "{err}");
+    }
+    let refused = |cfg: RenderConfig| {
+        render(&with_density(1.0), &rays, &cfg)
+            .unwrap_err()
+            .to_string()
+    };
+    let message = refused(cfg.with_colour_interpolation(ColourInterpolation::DensityWeighted));
+    assert!(message.contains("density-weighted"), "{message}");
+    for (scale, shift) in [
+        (0.0, 0.0),
+        (-1.0, 0.0),
+        (1.0, f32::NAN),
+        (f32::INFINITY, 0.0),
+    ] {
+        let message =
+            refused(cfg.with_density(DensityInterpolation::PostActivated { scale, shift }));
+        assert!(message.contains("density"), "{message}");
+    }
+}

@@ -36,7 +36,15 @@ pub(super) struct FitGrid {
     /// How many entries of `live` are set (kept so progress reports need no count per step).
     live_count: usize,
     activation: Activation,
+    /// Whether the renderer takes raw density and activates it per sample
+    /// (volrender's `DensityInterpolation::PostActivated`) instead of physical voxels.
+    post_activated: bool,
 }
+
+/// The raw density a dead voxel renders with when the renderer activates density per sample:
+/// far enough below the activation's knee that its softplus is exactly 0 in f32 (so the
+/// renderer skips it, as it skips a dead voxel's physical 0).
+const DEAD_RAW_DENSITY: f32 = -1.0e4;
 
 /// Weights of the regularisers, applied to raw values, each a mean over voxels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,11 +67,25 @@ fn sigmoid(x: f32) -> f32 {
 impl FitGrid {
     /// A grid of edge `size` with density `initial_sigma` (physical, per world length) and grey
     /// colour everywhere, every voxel live.
-    pub(super) fn new(size: usize, activation: Activation, initial_sigma: f32) -> Result<Self> {
+    /// With `post_activated` the renderer activates density per sample ([`FitGrid::rendered`]).
+    pub(super) fn new(
+        size: usize,
+        activation: Activation,
+        initial_sigma: f32,
+        post_activated: bool,
+    ) -> Result<Self> {
         let voxels = size * size * size;
         let mut raw = vec![0.0; CHANNELS * voxels];
         raw[..voxels].fill(activation.raw_density(initial_sigma)?);
-        Ok(Self::from_raw(size, raw, activation))
+        Ok(Self::from_raw(size, raw, activation).post_activated(post_activated))
+    }
+
+    /// The same grid, rendered with per-sample activation of its density or not.
+    fn post_activated(self, post_activated: bool) -> Self {
+        Self {
+            post_activated,
+            ..self
+        }
     }
 
     fn from_raw(size: usize, raw: Vec<f32>, activation: Activation) -> Self {
@@ -77,6 +99,7 @@ impl FitGrid {
             live: vec![true; voxels],
             live_count: voxels,
             activation,
+            post_activated: false,
         }
     }
 
@@ -97,6 +120,18 @@ impl FitGrid {
     /// The physical `(4, s, s, s)` values: `sigma = scale softplus(raw + shift)` on live voxels
     /// and 0 on dead ones, `rgb = sigmoid(raw)`.
     pub(super) fn physical(&self) -> Vec<f32> {
+        self.values(true)
+    }
+
+    /// The `(4, s, s, s)` values the fit's renderer takes: [`FitGrid::physical`], or when
+    /// post-activated the raw density itself on live voxels ([`DEAD_RAW_DENSITY`] on dead ones)
+    /// beside the physical colours.
+    pub(super) fn rendered(&self) -> Vec<f32> {
+        self.values(!self.post_activated)
+    }
+
+    /// Colour through its activation, density through it when `activate_density`.
+    fn values(&self, activate_density: bool) -> Vec<f32> {
         let voxels = self.voxels();
         let (scale, shift) = (self.activation.density_scale, self.activation.density_shift);
         let mut out = vec![0.0; self.raw.len()];
@@ -107,7 +142,12 @@ impl FitGrid {
             .zip(self.live.par_chunks(CHUNK))
             .for_each(|((out, raw), live)| {
                 for ((o, &r), &l) in out.iter_mut().zip(raw).zip(live) {
-                    *o = if l { scale * softplus(r + shift) } else { 0.0 };
+                    *o = match (l, activate_density) {
+                        (true, true) => scale * softplus(r + shift),
+                        (true, false) => r,
+                        (false, true) => 0.0,
+                        (false, false) => DEAD_RAW_DENSITY,
+                    };
                 }
             });
         colour
@@ -121,12 +161,14 @@ impl FitGrid {
         out
     }
 
-    /// Turns `grad`, the loss gradient with respect to [`FitGrid::physical`], into the gradient
-    /// with respect to the raw values (the activation's chain rule; 0 on dead densities), in
-    /// place, and adds the regularisers' gradients.
+    /// Turns `grad`, the loss gradient with respect to [`FitGrid::rendered`], into the gradient
+    /// with respect to the raw values (the activation's chain rule, which for post-activated
+    /// density the renderer has already applied; 0 on dead densities), in place, and adds the
+    /// regularisers' gradients.
     pub(super) fn raw_gradient(&self, grad: &mut [f32], regularisers: &Regularisers) {
         let voxels = self.voxels();
         let (scale, shift) = (self.activation.density_scale, self.activation.density_shift);
+        let post_activated = self.post_activated;
         let (density, colour) = grad.split_at_mut(voxels);
         density
             .par_chunks_mut(CHUNK)
@@ -135,10 +177,10 @@ impl FitGrid {
             .for_each(|((g, raw), live)| {
                 for ((g, &r), &l) in g.iter_mut().zip(raw).zip(live) {
                     // d softplus(x) / dx = sigmoid(x).
-                    *g = if l {
-                        *g * scale * sigmoid(r + shift)
-                    } else {
-                        0.0
+                    *g = match (l, post_activated) {
+                        (true, false) => *g * scale * sigmoid(r + shift),
+                        (true, true) => *g,
+                        (false, _) => 0.0,
                     };
                 }
             });
@@ -225,7 +267,8 @@ impl FitGrid {
             &candle_core::Device::Cpu,
         )?;
         let grown = resample_tensor(&raw, GridDims::cube(size))?;
-        *self = Self::from_raw(size, grown.flatten_all()?.to_vec1()?, self.activation);
+        *self = Self::from_raw(size, grown.flatten_all()?.to_vec1()?, self.activation)
+            .post_activated(self.post_activated);
         Ok(())
     }
 }
@@ -378,7 +421,7 @@ mod tests {
     #[test]
     fn refresh_kills_empty_voxels_and_keeps_their_neighbours() -> Result<()> {
         let s = 6;
-        let mut grid = FitGrid::new(s, activation(), 1e-3)?;
+        let mut grid = FitGrid::new(s, activation(), 1e-3, false)?;
         let dense = activation().raw_density(50.0)?;
         grid.raw[(3 * s + 3) * s + 3] = dense;
         grid.refresh_live(0.01, 2.0 / s as f32);
@@ -392,7 +435,7 @@ mod tests {
     #[test]
     fn adam_skips_dead_densities_and_moves_the_rest() -> Result<()> {
         let s = 3;
-        let mut grid = FitGrid::new(s, activation(), 1.0)?;
+        let mut grid = FitGrid::new(s, activation(), 1.0, false)?;
         grid.live[0] = false;
         let before = grid.raw.clone();
         grid.adam_step(&vec![1.0; grid.raw.len()], 0.1);

@@ -39,7 +39,9 @@ use std::time::Instant;
 use candle_core::{Device, Tensor, Var};
 use radiance_volume::{Aabb, Activation, RadianceVolume};
 use rand::SeedableRng;
-use volrender::{render, Camera, ColourInterpolation, Rays, RenderConfig, Sampler};
+use volrender::{
+    render, Camera, ColourInterpolation, DensityInterpolation, Rays, RenderConfig, Sampler,
+};
 
 use crate::dataset::Dataset;
 use crate::error::{invalid, Result};
@@ -104,6 +106,12 @@ pub struct FitConfig {
     pub seed: u64,
     /// How the renderer interpolates colour (a SinGRAV run's, when the fit is its target).
     pub colour_interpolation: ColourInterpolation,
+    /// Render with post-activated density (volrender's `DensityInterpolation::PostActivated`
+    /// with `activation`'s scale and shift, DVGO's rule): samples activate the interpolated raw
+    /// density, so the grid holds edges sharper than its voxels. The fit then optimises and
+    /// renders raw density ([`FittedVolume::rendered`]); its saved volume stays physical per
+    /// voxel.
+    pub post_activation: bool,
 }
 
 impl Default for FitConfig {
@@ -134,6 +142,7 @@ impl Default for FitConfig {
             use_depth: true,
             seed: 0,
             colour_interpolation: training.colour_interpolation(),
+            post_activation: false,
         }
     }
 }
@@ -186,6 +195,11 @@ impl FitConfig {
                 "occupancy_threshold",
                 "an opacity in [0, 1)",
             ),
+            (
+                !(self.post_activation && self.colour_interpolation.is_density_weighted()),
+                "post_activation",
+                "it off with density-weighted colour (whose weights are physical densities)",
+            ),
         ];
         match checks.iter().find(|(ok, _, _)| !ok) {
             Some((_, what, expected)) => Err(invalid(
@@ -206,6 +220,19 @@ impl FitConfig {
             .with_background(self.background)
             .with_aabb(self.aabb)
             .with_colour_interpolation(self.colour_interpolation)
+            .with_density(self.density_interpolation())
+    }
+
+    /// The renderer's density rule: post-activated with the fit's activation, or physical.
+    fn density_interpolation(&self) -> DensityInterpolation {
+        if self.post_activation {
+            DensityInterpolation::PostActivated {
+                scale: self.activation.density_scale,
+                shift: self.activation.density_shift,
+            }
+        } else {
+            DensityInterpolation::Physical
+        }
     }
 
     /// The grid edge at budget fraction `fraction`: geometric steps from `start_size` to
@@ -246,6 +273,10 @@ pub struct FitProgress {
 pub struct FittedVolume {
     /// The physical volume (density exactly 0 where the occupancy mask found nothing).
     pub volume: RadianceVolume,
+    /// The volume as the fit's renderer takes it, what [`view_psnr`] and [`render_views`]
+    /// render: `volume` itself, or with [`FitConfig::post_activation`] the same with raw
+    /// density in channel 0.
+    pub rendered: RadianceVolume,
     /// Steps taken.
     pub steps: usize,
     /// Wall-clock seconds of the fit.
@@ -269,7 +300,12 @@ pub fn fit_volume(
     let level = views.level(views.width(), views.height(), &Device::Cpu)?;
     let bank = RayBank::from_level(&level)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
-    let mut grid = FitGrid::new(config.size_at(0.0), config.activation, config.initial_sigma)?;
+    let mut grid = FitGrid::new(
+        config.size_at(0.0),
+        config.activation,
+        config.initial_sigma,
+        config.post_activation,
+    )?;
     let render_config = config
         .render_config()
         .with_depth(config.use_depth && config.lambda_depth > 0.0)
@@ -299,12 +335,12 @@ pub fn fit_volume(
             grid.refresh_live(config.occupancy_threshold, voxel_length(config.aabb, size));
         }
         let batch = bank.batch(&mut rng, config.rays_per_step)?;
-        let physical = Var::from_tensor(&Tensor::from_vec(
-            grid.physical(),
+        let rendered = Var::from_tensor(&Tensor::from_vec(
+            grid.rendered(),
             (CHANNELS, size, size, size),
             &Device::Cpu,
         )?)?;
-        let out = render(physical.as_tensor(), &batch.rays, &render_config)?;
+        let out = render(rendered.as_tensor(), &batch.rays, &render_config)?;
         let colour_mse = (&out.rgb - &batch.rgb)?.sqr()?.mean_all()?;
         let mut loss = (&colour_mse * f64::from(config.lambda_color))?;
         if let Some(depth) = &out.depth {
@@ -324,7 +360,7 @@ pub fn fit_volume(
             ));
         }
         let grads = loss.backward()?;
-        let mut grad: Vec<f32> = match grads.get(&physical) {
+        let mut grad: Vec<f32> = match grads.get(&rendered) {
             Some(g) => g.flatten_all()?.to_vec1()?,
             None => vec![0.0; CHANNELS * size * size * size],
         };
@@ -341,12 +377,13 @@ pub fn fit_volume(
         });
     }
     let size = grid.size();
-    let volume = RadianceVolume::new(
-        Tensor::from_vec(grid.physical(), (CHANNELS, size, size, size), &Device::Cpu)?,
-        config.aabb,
-    )?;
+    let volume_of = |values: Vec<f32>| -> Result<RadianceVolume> {
+        let data = Tensor::from_vec(values, (CHANNELS, size, size, size), &Device::Cpu)?;
+        Ok(RadianceVolume::new(data, config.aabb)?)
+    };
     Ok(FittedVolume {
-        volume,
+        volume: volume_of(grid.physical())?,
+        rendered: volume_of(grid.rendered())?,
         steps: step,
         seconds: start.elapsed().as_secs_f64(),
         live_fraction: grid.live_fraction(),
@@ -358,8 +395,9 @@ fn voxel_length(aabb: Aabb, size: usize) -> f32 {
     aabb.size().min_element() / size as f32
 }
 
-/// Renders a physical `volume` from `cameras` (all of one size) with the fit's renderer:
-/// colour `(V, 3, h, w)`.
+/// Renders `volume` from `cameras` (all of one size) with the fit's renderer: colour
+/// `(V, 3, h, w)`. The volume is physical, or with [`FitConfig::post_activation`] holds raw
+/// density in channel 0 (as [`FittedVolume::rendered`]).
 pub fn render_views(
     volume: &RadianceVolume,
     cameras: &[Camera],
@@ -381,8 +419,9 @@ pub fn render_views(
     Ok(Tensor::stack(&views, 0)?)
 }
 
-/// The colour PSNR (dB) of `volume` rendered from each view `indices` of `dataset` against its
-/// image (composited on the config's background, as the dataset was loaded).
+/// The colour PSNR (dB) of `volume` (as [`render_views`] takes it) rendered from each view
+/// `indices` of `dataset` against its image (composited on the config's background, as the
+/// dataset was loaded).
 pub fn view_psnr(
     volume: &RadianceVolume,
     dataset: &Dataset,

@@ -185,6 +185,7 @@ mod tests {
             data: &data,
             n: [3, 3, 3],
             density_weighted: false,
+            post_activation: None,
         };
         let grid = GridSpec {
             min: [-1.0; 3],
@@ -244,6 +245,7 @@ mod tests {
             data: &data,
             n,
             density_weighted: false,
+            post_activation: None,
         };
         let grid = GridSpec {
             min: [-1.0; 3],

@@ -12,6 +12,7 @@
 mod chunk;
 mod composite;
 mod exp;
+mod log;
 mod march;
 mod tile;
 mod trilinear;
@@ -31,6 +32,10 @@ pub(crate) trait Real: Float + Send + Sync + std::fmt::Debug + Default + 'static
     /// `e^x` for `x <= 0`: inline arithmetic within 2 ulp for f32 (see `exp`), the standard
     /// library's `exp` for f64 (the reference precision).
     fn exp_nonpositive(self) -> Self;
+
+    /// `ln(1 + x)` for `x` in `[0, 1]`: inline arithmetic within 2 ulp for f32 (see `log`), the
+    /// standard library's `ln_1p` for f64.
+    fn ln_1p_unit(self) -> Self;
 
     /// Truncates a value known to be in `[0, 2^31)` to an index: one conversion instruction
     /// (through `i32`) instead of the range-checked float-to-integer sequence.
@@ -86,6 +91,11 @@ impl Real for f32 {
         exp::exp_nonpositive(self)
     }
 
+    #[inline(always)]
+    fn ln_1p_unit(self) -> Self {
+        log::ln_1p_unit(self)
+    }
+
     index_conversions!(f32, 12_582_912.0); // 1.5 * 2^23
 }
 
@@ -100,6 +110,11 @@ impl Real for f64 {
         self.exp()
     }
 
+    #[inline(always)]
+    fn ln_1p_unit(self) -> Self {
+        self.ln_1p()
+    }
+
     index_conversions!(f64, 6_755_399_441_055_744.0); // 1.5 * 2^52
 }
 
@@ -107,12 +122,28 @@ impl Real for f64 {
 /// `(z, y, x)`, with `n = [w, h, d]` cells along x, y, z. With `density_weighted` the colours are
 /// premultiplied, `[sigma, sigma r, sigma g, sigma b]`, and a sample's colour is its
 /// interpolated premultiplied colour divided by its interpolated density
-/// ([`crate::ColourInterpolation::DensityWeighted`]).
+/// ([`crate::ColourInterpolation::DensityWeighted`]). With `post_activation = [scale, shift]`
+/// channel 0 is raw density and a sample's density is `scale * softplus(raw + shift)` of its
+/// interpolated raw value ([`crate::DensityInterpolation::PostActivated`]).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct VolumeView<'a, T> {
     pub(crate) data: &'a [[T; 4]],
     pub(crate) n: [usize; 3],
     pub(crate) density_weighted: bool,
+    pub(crate) post_activation: Option<[T; 2]>,
+}
+
+/// `(softplus(x), sigmoid(x))` = `(ln(1 + e^x), d softplus / dx)`, without overflow: with
+/// `e = exp(-|x|)`, `softplus = max(x, 0) + ln(1 + e)` and the sigmoid is `1 / (1 + e)` for
+/// `x >= 0`, `e / (1 + e)` below. Where `e` underflows (x below about -87 in f32) softplus is
+/// exactly 0, which is what lets empty-space skipping treat such voxels as empty.
+#[inline(always)]
+pub(crate) fn softplus_and_slope<T: Real>(x: T) -> (T, T) {
+    let e = (-x.abs()).exp_nonpositive();
+    let positive = if x > T::zero() { x } else { T::zero() };
+    let inverse = (T::one() + e).recip();
+    let slope = if x >= T::zero() { inverse } else { e * inverse };
+    (positive + e.ln_1p_unit(), slope)
 }
 
 #[cfg(test)]

@@ -171,7 +171,7 @@ mod tests {
     use crate::config::Sampler;
 
     /// The AVX2+FMA build (where the CPU has it) gives the same bits as the baseline build,
-    /// forward and backward, with skipping on and off.
+    /// forward and backward, with skipping on and off, physical and post-activated density.
     #[test]
     fn instruction_sets_agree_bit_for_bit() {
         let n = [5, 4, 6];
@@ -200,12 +200,17 @@ mod tests {
         let dirs: Vec<[f32; 3]> = (0..40)
             .map(|i| [1.0, 0.02 * (i % 3) as f32, -0.1 + 0.01 * i as f32])
             .collect();
-        for occupancy in [None, Some(occ)] {
+        let rules = [None, Some([25.0, -4.0])];
+        for (occupancy, post_activation) in [None, Some(occ)]
+            .into_iter()
+            .flat_map(|o| rules.map(|r| (o, r)))
+        {
             let kernel = |isa| RayKernel {
                 volume: VolumeView {
                     data: &data,
                     n,
                     density_weighted: false,
+                    post_activation,
                 },
                 occupancy,
                 grid: GridSpec {

@@ -105,6 +105,7 @@ mod tests {
             data: &interleaved,
             n: [4, 3, 2],
             density_weighted: false,
+            post_activation: None,
         };
         let mut expected = [0f32; 4];
         for p in [
