@@ -97,9 +97,10 @@ struct Evaluation {
     held_out_psnr: Option<f64>,
     held_out_ssim: Option<f64>,
     held_out_depth_rmse: Option<f64>,
-    /// dB: V* itself, the finest 3D scale's volume (what `volgen sample --reconstruction`
-    /// writes), rendered from every training view at the dataset's resolution as `volgen fit`
-    /// measures its volumes, so the two compare on equal terms (no upsampler).
+    /// dB: V* itself, the finest 3D scale's volume, rendered from every training view at the
+    /// dataset's resolution as `volgen fit` measures its volumes, by the run's density rule
+    /// (post-activated runs: as `volgen fit --post-activation`), so the two compare on equal
+    /// terms (no upsampler).
     volume_psnr: f64,
     /// How many training views `volume_psnr` averages.
     volume_views: usize,
@@ -233,7 +234,7 @@ fn evaluate(
             )
         })
         .transpose()?;
-    // In the scene's coordinates, where `to_physical` puts the volume.
+    // In the scene's coordinates, with the density rule the run renders by.
     let v_star_volume = model.to_rendered(&v_star)?;
     let training_volume_psnr = volume_psnr(&model, &v_star_volume, &scene_dataset, &training)?;
     let held_out_volume_psnr = (!held_out.is_empty())

@@ -910,14 +910,11 @@ impl TrainConfig {
     /// The renderer's density rule for [`TrainConfig::post_activation`], with this run's
     /// activation.
     pub fn density_interpolation(&self) -> volrender::DensityInterpolation {
-        if self.post_activation {
-            volrender::DensityInterpolation::PostActivated {
-                scale: self.density_scale,
-                shift: self.density_shift,
-            }
-        } else {
-            volrender::DensityInterpolation::Physical
-        }
+        volrender::DensityInterpolation::post_activated_if(
+            self.post_activation,
+            self.density_scale,
+            self.density_shift,
+        )
     }
 
     /// Checks that the sizes agree and every setting is in range.

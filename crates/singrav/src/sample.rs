@@ -132,13 +132,22 @@ impl SinGrav {
     /// same opacity along the longer rays).
     pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
         let volume = self.config().activation().apply(&raw.squeeze(0)?)?;
-        let Some(bounds) = self.config().bounds else {
-            return Ok(RadianceVolume::new(volume, Aabb::CUBE)?);
-        };
-        let density = (volume.narrow(0, 0, 1)? / f64::from(bounds.half_side()))?;
+        let (cube, half_side) = self.scene_cube();
+        if half_side == 1.0 {
+            return Ok(RadianceVolume::new(volume, cube)?);
+        }
+        let density = (volume.narrow(0, 0, 1)? / f64::from(half_side))?;
         let rest = volume.narrow(0, 1, volume.dim(0)? - 1)?;
         let volume = Tensor::cat(&[&density, &rest], 0)?;
-        Ok(RadianceVolume::new(volume, bounds.cube())?)
+        Ok(RadianceVolume::new(volume, cube)?)
+    }
+
+    /// The model's cube in the scene's coordinates and its half side: `[-1, 1]^3` and 1, or
+    /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) their cube.
+    fn scene_cube(&self) -> (Aabb, f32) {
+        self.config().bounds.map_or((Aabb::CUBE, 1.0), |bounds| {
+            (bounds.cube(), bounds.half_side())
+        })
     }
 
     /// A raw volume `(1, 4, s, s, s)` as a renderer outside the model takes it, in the scene's
@@ -171,10 +180,7 @@ impl SinGrav {
             return Ok((self.to_physical(raw)?, DensityInterpolation::Physical));
         }
         let volume = config.activation().apply_colour(&raw.squeeze(0)?)?;
-        let (aabb, half_side) = match config.bounds {
-            Some(bounds) => (bounds.cube(), bounds.half_side()),
-            None => (Aabb::CUBE, 1.0),
-        };
+        let (aabb, half_side) = self.scene_cube();
         let density = DensityInterpolation::PostActivated {
             scale: config.density_scale / half_side,
             shift: config.density_shift,

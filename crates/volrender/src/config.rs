@@ -47,8 +47,8 @@ pub const MAX_SAMPLES_PER_RAY: usize = 1 << 24;
 
 /// The range the renderer accepts, so that every product in the forward and backward passes
 /// stays finite in f32 (found by fuzzing: a box 1e37 wide rendered finite images whose
-/// gradients overflowed): colours, the volume's and the background's, at most this in
-/// magnitude (density may be any finite value >= 0), ...
+/// gradients overflowed): colours, the volume's and the background's, and post-activated raw
+/// density at most this in magnitude (physical density may be any finite value >= 0), ...
 pub const MAX_VOLUME_VALUE: f32 = 1e10;
 /// ... box corners and ray origins within this of the origin in every coordinate, ...
 pub const MAX_COORDINATE: f32 = 1e8;
@@ -144,6 +144,24 @@ pub enum DensityInterpolation {
 }
 
 impl DensityInterpolation {
+    /// The rule a yes/no switch names: post-activated with `scale` and `shift` for `true`,
+    /// physical for `false`.
+    ///
+    /// ```
+    /// use volrender::DensityInterpolation;
+    /// let on = DensityInterpolation::post_activated_if(true, 25.0, -4.0);
+    /// assert_eq!(on.post_activation(), Some([25.0, -4.0]));
+    /// assert_eq!(DensityInterpolation::post_activated_if(false, 25.0, -4.0), DensityInterpolation::Physical);
+    /// ```
+    #[must_use]
+    pub fn post_activated_if(switch: bool, scale: f32, shift: f32) -> Self {
+        if switch {
+            Self::PostActivated { scale, shift }
+        } else {
+            Self::Physical
+        }
+    }
+
     /// The activation's `[scale, shift]` when densities are post-activated.
     #[must_use]
     pub fn post_activation(self) -> Option<[f32; 2]> {

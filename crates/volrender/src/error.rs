@@ -16,7 +16,8 @@ pub enum Error {
         /// What was expected and what was given.
         why: Cow<'static, str>,
     },
-    /// A volume holds values the renderer cannot use: NaN or infinite values, or negative density.
+    /// A volume holds values the renderer cannot use: NaN or infinite values, negative physical
+    /// density, or values beyond [`MAX_VOLUME_VALUE`](crate::MAX_VOLUME_VALUE) in magnitude.
     #[error("invalid volume values: {count} bad value(s), first at {first}: {why}")]
     InvalidVolume {
         /// How many values are bad.

@@ -5,7 +5,8 @@
 //!   field of view or intrinsics, look-at, hemisphere sampling; [`load_transforms`] reads them
 //!   from a NeRF `transforms.json`.
 //! - [`Rays`]: one ray per pixel centre, or a seeded random subset of pixels.
-//! - [`render`] / [`render_batch`]: the paper's equation (1) on a physical volume `(C, D, H, W)`,
+//! - [`render`] / [`render_batch`]: the paper's equation (1) on a volume `(C, D, H, W)` (physical,
+//!   or with raw density activated per sample: [`DensityInterpolation`]),
 //!   differentiable with respect to the volume (closed-form O(N) backward), deterministic, parallel
 //!   over rays; [`RenderConfig`] picks the [`Sampler`], early termination, empty-space skipping,
 //!   background and outputs.
@@ -23,7 +24,8 @@
 //! # Conventions (shared by every volgen crate)
 //! - World space is right-handed and Z-up; the default volume box is `[-1, 1]^3`.
 //! - A volume tensor is `(C, D, H, W)` (batched `(N, C, D, H, W)`), D along z, H along y, W
-//!   along x; channel 0 is density sigma (>= 0, per world length), channels 1..4 RGB.
+//!   along x; channel 0 is density sigma (>= 0, per world length; raw density for a
+//!   post-activating renderer), channels 1..4 RGB.
 //! - Voxels are cell-centred; sampling is trilinear between centres, edge-clamped inside the
 //!   box, 0 outside (radiance-volume's rule).
 //! - Rendering: samples `t_i` on `[t_entry, t_exit]` (`t_entry = max(t_near, 0)`), `delta_i` the

@@ -202,9 +202,19 @@ fn with_activated_density(volumes: &Tensor, [scale, shift]: [f32; 2]) -> Result<
     fn activate<T: Real + WithDType>(raw: &Tensor, scale: f32, shift: f32) -> Result<Tensor> {
         let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
         let values: Vec<T> = raw.flatten_all()?.to_vec1()?;
+        // The occupancy grid reads f32 (`CellDistances::build`): an f64 density too small for
+        // f32 is kept above 0 so that no voxel the kernel renders counts as empty.
+        let smallest = T::of(f64::from(f32::MIN_POSITIVE));
         let sigma = values
             .into_par_iter()
-            .map(|x| scale * softplus_and_slope(x + shift).0)
+            .map(|x| {
+                let sigma = scale * softplus_and_slope(x + shift).0;
+                if sigma > T::zero() && sigma < smallest {
+                    smallest
+                } else {
+                    sigma
+                }
+            })
             .collect();
         Ok(Tensor::from_vec(sigma, raw.shape(), raw.device())?)
     }

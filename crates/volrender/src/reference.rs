@@ -17,9 +17,9 @@ use crate::op::{grid_spec, RenderOutput};
 use crate::rays::Rays;
 
 /// Renders `(C, D, H, W)` along `rays` with candle ops; supports the `Uniform` and `UniformLeft`
-/// samplers, both colour interpolations, both density rules, the background and both extra outputs (always
-/// returned), but neither early termination nor skipping (they do not change its result when
-/// `epsilon` is 0).
+/// samplers, both colour interpolations, both density rules, the background and both extra
+/// outputs (always returned), but neither early termination nor skipping (they do not change
+/// its result when `epsilon` is 0).
 ///
 /// ```
 /// use candle_core::{Device, Tensor, DType};

@@ -225,14 +225,11 @@ impl FitConfig {
 
     /// The renderer's density rule: post-activated with the fit's activation, or physical.
     fn density_interpolation(&self) -> DensityInterpolation {
-        if self.post_activation {
-            DensityInterpolation::PostActivated {
-                scale: self.activation.density_scale,
-                shift: self.activation.density_shift,
-            }
-        } else {
-            DensityInterpolation::Physical
-        }
+        DensityInterpolation::post_activated_if(
+            self.post_activation,
+            self.activation.density_scale,
+            self.activation.density_shift,
+        )
     }
 
     /// The grid edge at budget fraction `fraction`: geometric steps from `start_size` to
