@@ -16,7 +16,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
-use crate::grid::{Aabb, GridDims};
+use crate::grid::{Aabb, GridDims, VoxelGrid};
 use crate::volume::RadianceVolume;
 
 /// A coarse grid of booleans: which blocks of voxels can hold non-zero density.
@@ -47,6 +47,33 @@ impl OccupancyGrid {
     /// and axis (e.g. 4 or 8), marking cells whose footprint holds density `> threshold`.
     /// NaN densities count as occupied.
     pub fn build(volume: &RadianceVolume, voxels_per_cell: usize, threshold: f32) -> Result<Self> {
+        let voxels = volume.dims().voxel_count();
+        volume.with_values(|values| {
+            Self::from_density(&values[..voxels], volume.grid(), voxels_per_cell, threshold)
+        })?
+    }
+
+    /// Builds the grid from density values alone, `(z, y, x)` row-major over `grid` (what
+    /// [`OccupancyGrid::build`] reads of a volume), for densities that are not a volume's channel
+    /// 0, such as activated raw densities.
+    ///
+    /// ```
+    /// use radiance_volume::{Aabb, GridDims, OccupancyGrid, VoxelGrid};
+    /// use glam::Vec3;
+    /// let grid = VoxelGrid::new(Aabb::CUBE, GridDims::cube(8))?;
+    /// let mut density = vec![0.0f32; 512];
+    /// density[grid.dims.index(7, 7, 7)] = 2.0;
+    /// let occ = OccupancyGrid::from_density(&density, &grid, 4, 0.0)?;
+    /// assert!(occ.is_occupied_at(Vec3::splat(0.9)) && !occ.is_occupied_at(Vec3::splat(-0.9)));
+    /// assert!(OccupancyGrid::from_density(&density[1..], &grid, 4, 0.0).is_err());
+    /// # Ok::<(), radiance_volume::Error>(())
+    /// ```
+    pub fn from_density(
+        density: &[f32],
+        grid: &VoxelGrid,
+        voxels_per_cell: usize,
+        threshold: f32,
+    ) -> Result<Self> {
         if voxels_per_cell == 0 {
             return Err(invalid(
                 "voxels_per_cell",
@@ -59,44 +86,53 @@ impl OccupancyGrid {
                 format!("expected a finite threshold >= 0, got {threshold}"),
             ));
         }
-        let vd = volume.dims();
+        let vd = grid.dims;
+        if density.len() != vd.voxel_count() {
+            return Err(invalid(
+                "density",
+                format!(
+                    "expected {} values for a {} x {} x {} grid, got {}",
+                    vd.voxel_count(),
+                    vd.d,
+                    vd.h,
+                    vd.w,
+                    density.len()
+                ),
+            ));
+        }
         let k = voxels_per_cell;
         let dims = GridDims::new(vd.d.div_ceil(k), vd.h.div_ceil(k), vd.w.div_ceil(k));
         let mut occupied = vec![false; dims.voxel_count()];
-        volume.with_values(|values| {
-            let sigma = &values[..vd.voxel_count()];
-            // In parallel over slabs of cells with the same z: each reads the voxel slices whose
-            // footprint reaches it (its own and one more on each side) and marks only its cells.
-            let slab = dims.h * dims.w;
-            occupied
-                .par_chunks_mut(slab)
-                .enumerate()
-                .for_each(|(slab_z, cells)| {
-                    let first = (slab_z * k).saturating_sub(1);
-                    let last = ((slab_z + 1) * k).min(vd.d - 1);
-                    for z in first..=last {
-                        if !cells_of_voxel(z, k, dims.d).contains(&Some(slab_z)) {
-                            continue;
-                        }
-                        for y in 0..vd.h {
-                            let cy = cells_of_voxel(y, k, dims.h);
-                            let row = &sigma[vd.index(z, y, 0)..vd.index(z, y, 0) + vd.w];
-                            for (x, &s) in row.iter().enumerate() {
-                                // NaN counts as occupied: unknown density is never skipped.
-                                if s > threshold || s.is_nan() {
-                                    let cx = cells_of_voxel(x, k, dims.w);
-                                    for &b in cy.iter().flatten() {
-                                        for &c in cx.iter().flatten() {
-                                            cells[b * dims.w + c] = true;
-                                        }
+        // In parallel over slabs of cells with the same z: each reads the voxel slices whose
+        // footprint reaches it (its own and one more on each side) and marks only its cells.
+        let slab = dims.h * dims.w;
+        occupied
+            .par_chunks_mut(slab)
+            .enumerate()
+            .for_each(|(slab_z, cells)| {
+                let first = (slab_z * k).saturating_sub(1);
+                let last = ((slab_z + 1) * k).min(vd.d - 1);
+                for z in first..=last {
+                    if !cells_of_voxel(z, k, dims.d).contains(&Some(slab_z)) {
+                        continue;
+                    }
+                    for y in 0..vd.h {
+                        let cy = cells_of_voxel(y, k, dims.h);
+                        let row = &density[vd.index(z, y, 0)..vd.index(z, y, 0) + vd.w];
+                        for (x, &s) in row.iter().enumerate() {
+                            // NaN counts as occupied: unknown density is never skipped.
+                            if s > threshold || s.is_nan() {
+                                let cx = cells_of_voxel(x, k, dims.w);
+                                for &b in cy.iter().flatten() {
+                                    for &c in cx.iter().flatten() {
+                                        cells[b * dims.w + c] = true;
                                     }
                                 }
                             }
                         }
                     }
-                });
-        })?;
-        let grid = volume.grid();
+                }
+            });
         Ok(Self {
             origin: grid.aabb.min,
             cell_size: grid.voxel_size() * k as f32,

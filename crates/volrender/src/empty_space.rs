@@ -3,7 +3,7 @@
 //! the trilinear corner block it starts is all empty.
 
 use candle_core::Tensor;
-use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume};
+use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume, VoxelGrid};
 use rayon::prelude::*;
 
 use crate::config::RenderConfig;
@@ -29,7 +29,31 @@ impl CellDistances {
     /// f32's smallest subnormal (about 1.4e-45) count as empty.
     pub(crate) fn build(volume: &Tensor, cfg: &RenderConfig) -> Result<Self> {
         let physical = RadianceVolume::new(volume.narrow(0, 0, 4)?.detach(), cfg.aabb)?;
-        let grid = OccupancyGrid::build(&physical, cfg.occupancy_cell, 0.0)?;
+        Ok(Self::from_grid(&OccupancyGrid::build(
+            &physical,
+            cfg.occupancy_cell,
+            0.0,
+        )?))
+    }
+
+    /// Builds them from physical densities alone, `(z, y, x)` row-major over a `dims` grid in
+    /// the config's box (for post-activated raw density, activated first).
+    pub(crate) fn from_density(
+        density: &[f32],
+        dims: GridDims,
+        cfg: &RenderConfig,
+    ) -> Result<Self> {
+        let grid = VoxelGrid::new(cfg.aabb, dims)?;
+        Ok(Self::from_grid(&OccupancyGrid::from_density(
+            density,
+            &grid,
+            cfg.occupancy_cell,
+            0.0,
+        )?))
+    }
+
+    /// The distances over an occupancy grid.
+    fn from_grid(grid: &OccupancyGrid) -> Self {
         let dims = grid.dims();
         let mut occupied = Vec::with_capacity(dims.voxel_count());
         for z in 0..dims.d {
@@ -38,11 +62,11 @@ impl CellDistances {
             }
         }
         let n = [dims.w, dims.h, dims.d];
-        Ok(Self {
+        Self {
             distance: chessboard_distances(&occupied, n),
             n,
             k: grid.voxels_per_cell(),
-        })
+        }
     }
 }
 

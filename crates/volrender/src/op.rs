@@ -151,15 +151,10 @@ pub fn render_batch(
         });
     }
     let dims = GridDims::new(d, h, w);
-    let occupancy = if cfg.skip_empty {
-        // The occupancy grid is of physical density, so raw density is activated first (with
-        // the kernel's own function, so that what it calls empty the kernel renders empty).
-        let physical = match cfg.density.post_activation() {
-            Some(activation) => with_activated_density(volumes, activation)?,
-            None => volumes.clone(),
-        };
+    // Post-activated volumes get theirs from the op, which activates the density anyway.
+    let occupancy = if cfg.skip_empty && cfg.density.post_activation().is_none() {
         (0..n)
-            .map(|i| CellDistances::build(&physical.get(i)?, cfg))
+            .map(|i| CellDistances::build(&volumes.get(i)?, cfg))
             .collect::<Result<Vec<_>>>()?
     } else {
         Vec::new()
@@ -196,39 +191,37 @@ fn unsupported_dtype(dtype: DType) -> Error {
     }
 }
 
-/// `volumes` with channel 0 replaced by `scale * softplus(channel 0 + shift)`, computed as the
-/// kernel computes a sample's post-activated density.
-fn with_activated_density(volumes: &Tensor, [scale, shift]: [f32; 2]) -> Result<Tensor> {
-    fn activate<T: Real + WithDType>(raw: &Tensor, scale: f32, shift: f32) -> Result<Tensor> {
-        let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
-        let values: Vec<T> = raw.flatten_all()?.to_vec1()?;
-        // The occupancy grid reads f32 (`CellDistances::build`): an f64 density too small for
-        // f32 is kept above 0 so that no voxel the kernel renders counts as empty.
-        let smallest = T::of(f64::from(f32::MIN_POSITIVE));
-        let sigma = values
-            .into_par_iter()
-            .map(|x| {
-                let sigma = scale * softplus_and_slope(x + shift).0;
-                if sigma > T::zero() && sigma < smallest {
-                    smallest
-                } else {
-                    sigma
-                }
-            })
-            .collect();
-        Ok(Tensor::from_vec(sigma, raw.shape(), raw.device())?)
-    }
-    let channels = volumes.dim(1)?;
-    let raw = volumes.narrow(1, 0, 1)?;
-    let sigma = match volumes.dtype() {
-        DType::F32 => activate::<f32>(&raw, scale, shift)?,
-        DType::F64 => activate::<f64>(&raw, scale, shift)?,
-        other => return Err(unsupported_dtype(other)),
-    };
-    Ok(Tensor::cat(
-        &[&sigma, &volumes.narrow(1, 1, channels - 1)?],
-        1,
-    )?)
+/// What skipping needs of a post-activated volume's raw `density`: the occupancy distances and
+/// empty corner blocks of its activated density, activated once with the kernel's own function
+/// (so what they call empty the kernel renders as exactly 0).
+fn activated_skipping<T: Real>(
+    density: &[T],
+    [scale, shift]: [f32; 2],
+    dims: GridDims,
+    cfg: &RenderConfig,
+) -> Result<(CellDistances, Vec<bool>)> {
+    let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
+    let sigma: Vec<T> = density
+        .par_iter()
+        .map(|&x| scale * softplus_and_slope(x + shift).0)
+        .collect();
+    // The occupancy grid reads f32: an f64 density too small for f32 is kept above 0 so that no
+    // voxel the kernel renders counts as empty.
+    let smallest = f64::from(f32::MIN_POSITIVE);
+    let sigma_f32: Vec<f32> = sigma
+        .par_iter()
+        .map(|&s| {
+            let s = s.to_f64().unwrap_or(f64::NAN);
+            if s > 0.0 && s < smallest {
+                f32::MIN_POSITIVE
+            } else {
+                s as f32
+            }
+        })
+        .collect();
+    let cells = CellDistances::from_density(&sigma_f32, dims, cfg)?;
+    let blocks = empty_blocks(&sigma, dims, &cells);
+    Ok((cells, blocks))
 }
 
 /// The render op: interleaved copies of the volumes (validated), rays and options.
@@ -247,6 +240,9 @@ struct CompositeOp<T: Pooled> {
 }
 
 impl<T: Pooled + WithDType> CompositeOp<T> {
+    /// The op for `volumes` (validated and copied here); with skipping, `occupancy` holds the
+    /// physical volumes' occupancy distances, and post-activated volumes get theirs here from
+    /// their activated density.
     fn new(
         volumes: &Tensor,
         dims: GridDims,
@@ -278,24 +274,21 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             post_activation.is_some(),
         )?;
         let voxels = dims.voxel_count();
-        let empty_blocks = occupancy
-            .iter()
-            .enumerate()
-            .map(|(b, cells)| {
-                let density = &values[b * channels * voxels..][..voxels];
-                match post_activation {
-                    None => empty_blocks(density, dims, cells),
-                    Some([scale, shift]) => {
-                        let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
-                        let sigma: Vec<T> = density
-                            .par_iter()
-                            .map(|&x| scale * softplus_and_slope(x + shift).0)
-                            .collect();
-                        empty_blocks(&sigma, dims, cells)
-                    }
-                }
-            })
-            .collect();
+        let density = |b: usize| &values[b * channels * voxels..][..voxels];
+        let (occupancy, empty_blocks) = match post_activation {
+            _ if !cfg.skip_empty => (Vec::new(), Vec::new()),
+            None => {
+                let blocks = (occupancy.iter().enumerate())
+                    .map(|(b, cells)| empty_blocks(density(b), dims, cells))
+                    .collect();
+                (occupancy, blocks)
+            }
+            Some(activation) => (0..rays.len())
+                .map(|b| activated_skipping(density(b), activation, dims, cfg))
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .unzip(),
+        };
         Ok(Self {
             volumes,
             empty_blocks,
