@@ -2,8 +2,7 @@
 //! occupied cell is (so a ray can leap over many empty cells at once), and per voxel, whether
 //! the trilinear corner block it starts is all empty.
 
-use candle_core::Tensor;
-use radiance_volume::{GridDims, OccupancyGrid, RadianceVolume, VoxelGrid};
+use radiance_volume::{GridDims, OccupancyGrid, VoxelGrid};
 use rayon::prelude::*;
 
 use crate::config::RenderConfig;
@@ -22,22 +21,8 @@ pub(crate) struct CellDistances {
 }
 
 impl CellDistances {
-    /// Builds radiance-volume's occupancy grid (threshold 0) of one `(C, D, H, W)` volume and
-    /// the distances over it.
-    ///
-    /// For f64 volumes the grid is built from the f32-rounded density, so densities below
-    /// f32's smallest subnormal (about 1.4e-45) count as empty.
-    pub(crate) fn build(volume: &Tensor, cfg: &RenderConfig) -> Result<Self> {
-        let physical = RadianceVolume::new(volume.narrow(0, 0, 4)?.detach(), cfg.aabb)?;
-        Ok(Self::from_grid(&OccupancyGrid::build(
-            &physical,
-            cfg.occupancy_cell,
-            0.0,
-        )?))
-    }
-
-    /// Builds them from physical densities alone, `(z, y, x)` row-major over a `dims` grid in
-    /// the config's box (for post-activated raw density, activated first).
+    /// Builds radiance-volume's occupancy grid (threshold 0) of physical densities, `(z, y, x)`
+    /// row-major over a `dims` grid in the config's box, and the distances over it.
     pub(crate) fn from_density(
         density: &[f32],
         dims: GridDims,
@@ -178,7 +163,6 @@ pub(crate) fn empty_blocks<T: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::{DType, Device};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -226,20 +210,11 @@ mod tests {
             let density: Vec<f32> = (0..dims.voxel_count())
                 .map(|_| if rng.random::<f64>() < 0.15 { 1.0 } else { 0.0 })
                 .collect();
-            let volume = Tensor::cat(
-                &[
-                    Tensor::from_vec(density.clone(), (1, dims.d, dims.h, dims.w), &Device::Cpu)
-                        .unwrap(),
-                    Tensor::ones((3, dims.d, dims.h, dims.w), DType::F32, &Device::Cpu).unwrap(),
-                ],
-                0,
-            )
-            .unwrap();
             let cfg = RenderConfig {
                 occupancy_cell: 2,
                 ..RenderConfig::default()
             };
-            let cells = CellDistances::build(&volume, &cfg).unwrap();
+            let cells = CellDistances::from_density(&density, dims, &cfg).unwrap();
             let got = empty_blocks(&density, dims, &cells);
             for z in 0..dims.d {
                 for y in 0..dims.h {

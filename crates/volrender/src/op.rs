@@ -151,21 +151,9 @@ pub fn render_batch(
         });
     }
     let dims = GridDims::new(d, h, w);
-    // Post-activated volumes get theirs from the op, which activates the density anyway.
-    let occupancy = if cfg.skip_empty && cfg.density.post_activation().is_none() {
-        (0..n)
-            .map(|i| CellDistances::build(&volumes.get(i)?, cfg))
-            .collect::<Result<Vec<_>>>()?
-    } else {
-        Vec::new()
-    };
     let packed = match volumes.dtype() {
-        DType::F32 => volumes.apply_op1(CompositeOp::<f32>::new(
-            volumes, dims, rays, cfg, occupancy,
-        )?)?,
-        DType::F64 => volumes.apply_op1(CompositeOp::<f64>::new(
-            volumes, dims, rays, cfg, occupancy,
-        )?)?,
+        DType::F32 => volumes.apply_op1(CompositeOp::<f32>::new(volumes, dims, rays, cfg)?)?,
+        DType::F64 => volumes.apply_op1(CompositeOp::<f64>::new(volumes, dims, rays, cfg)?)?,
         other => return Err(unsupported_dtype(other)),
     };
     let mut start = 0;
@@ -191,20 +179,24 @@ fn unsupported_dtype(dtype: DType) -> Error {
     }
 }
 
-/// What skipping needs of a post-activated volume's raw `density`: the occupancy distances and
-/// empty corner blocks of its activated density, activated once with the kernel's own function
-/// (so what they call empty the kernel renders as exactly 0).
-fn activated_skipping<T: Real>(
+/// What skipping needs of one volume's `density` (channel 0): the occupancy distances and the
+/// empty corner blocks of its physical density. Post-activated raw density is activated first,
+/// once, with the kernel's own function, so that what they call empty the kernel renders as
+/// exactly 0.
+fn skipping<T: Real>(
     density: &[T],
-    [scale, shift]: [f32; 2],
+    post_activation: Option<[f32; 2]>,
     dims: GridDims,
     cfg: &RenderConfig,
 ) -> Result<(CellDistances, Vec<bool>)> {
-    let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
-    let sigma: Vec<T> = density
-        .par_iter()
-        .map(|&x| scale * softplus_and_slope(x + shift).0)
-        .collect();
+    let activated: Option<Vec<T>> = post_activation.map(|[scale, shift]| {
+        let (scale, shift) = (T::of(f64::from(scale)), T::of(f64::from(shift)));
+        density
+            .par_iter()
+            .map(|&x| scale * softplus_and_slope(x + shift).0)
+            .collect()
+    });
+    let sigma = activated.as_deref().unwrap_or(density);
     // The occupancy grid reads f32: an f64 density too small for f32 is kept above 0 so that no
     // voxel the kernel renders counts as empty.
     let smallest = f64::from(f32::MIN_POSITIVE);
@@ -220,7 +212,7 @@ fn activated_skipping<T: Real>(
         })
         .collect();
     let cells = CellDistances::from_density(&sigma_f32, dims, cfg)?;
-    let blocks = empty_blocks(&sigma, dims, &cells);
+    let blocks = empty_blocks(sigma, dims, &cells);
     Ok((cells, blocks))
 }
 
@@ -240,16 +232,8 @@ struct CompositeOp<T: Pooled> {
 }
 
 impl<T: Pooled + WithDType> CompositeOp<T> {
-    /// The op for `volumes` (validated and copied here); with skipping, `occupancy` holds the
-    /// physical volumes' occupancy distances, and post-activated volumes get theirs here from
-    /// their activated density.
-    fn new(
-        volumes: &Tensor,
-        dims: GridDims,
-        rays: &[Rays],
-        cfg: &RenderConfig,
-        occupancy: Vec<CellDistances>,
-    ) -> Result<Self> {
+    /// The op for `volumes` (validated and copied here, with what skipping needs of each).
+    fn new(volumes: &Tensor, dims: GridDims, rays: &[Rays], cfg: &RenderConfig) -> Result<Self> {
         let channels = volumes.dim(1)?;
         let planar = volumes.contiguous()?;
         let (storage, layout) = planar.storage_and_layout();
@@ -274,20 +258,17 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             post_activation.is_some(),
         )?;
         let voxels = dims.voxel_count();
-        let density = |b: usize| &values[b * channels * voxels..][..voxels];
-        let (occupancy, empty_blocks) = match post_activation {
-            _ if !cfg.skip_empty => (Vec::new(), Vec::new()),
-            None => {
-                let blocks = (occupancy.iter().enumerate())
-                    .map(|(b, cells)| empty_blocks(density(b), dims, cells))
-                    .collect();
-                (occupancy, blocks)
-            }
-            Some(activation) => (0..rays.len())
-                .map(|b| activated_skipping(density(b), activation, dims, cfg))
+        let (occupancy, empty_blocks) = if cfg.skip_empty {
+            (0..rays.len())
+                .map(|b| {
+                    let density = &values[b * channels * voxels..][..voxels];
+                    skipping(density, post_activation, dims, cfg)
+                })
                 .collect::<Result<Vec<_>>>()?
                 .into_iter()
-                .unzip(),
+                .unzip()
+        } else {
+            (Vec::new(), Vec::new())
         };
         Ok(Self {
             volumes,

@@ -378,9 +378,15 @@ pub fn fit_volume(
         let data = Tensor::from_vec(values, (CHANNELS, size, size, size), &Device::Cpu)?;
         Ok(RadianceVolume::new(data, config.aabb)?)
     };
+    let volume = volume_of(grid.physical())?;
+    let rendered = if config.post_activation {
+        volume_of(grid.rendered())?
+    } else {
+        volume.clone()
+    };
     Ok(FittedVolume {
-        volume: volume_of(grid.physical())?,
-        rendered: volume_of(grid.rendered())?,
+        volume,
+        rendered,
         steps: step,
         seconds: start.elapsed().as_secs_f64(),
         live_fraction: grid.live_fraction(),

@@ -182,8 +182,9 @@ impl<T: Real> Chunk<T> {
     /// Interpolates the live lanes' values (and zeroes the rest); with `WEIGHTED` (a
     /// density-weighted volume) the premultiplied colour is then divided by the density
     /// ([`unpremultiply`]), with a post-activated volume the density is activated. With an
-    /// occupancy view, lanes whose corner block is empty are first marked dead. The colour rule is a constant, not a test per lane: tested in the loop, it
-    /// cost the separate rule 1.8x its instructions (callgrind).
+    /// occupancy view, lanes whose corner block is empty are first marked dead. The colour rule
+    /// is a constant, not a test per lane: tested in the loop, it cost the separate rule 1.8x
+    /// its instructions (callgrind).
     #[inline(always)]
     fn gather<const WEIGHTED: bool>(&mut self, vol: &VolumeView<'_, T>, occ: Option<&OccView<'_>>) {
         if let Some(o) = occ {

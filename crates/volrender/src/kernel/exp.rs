@@ -60,13 +60,7 @@ pub(crate) fn exp_nonpositive(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Distance in units in the last place between an f32 and the exact (f64) value.
-    fn ulps(got: f32, exact: f64) -> f64 {
-        let ulp = (exact as f32).abs();
-        let spacing = f32::from_bits(ulp.to_bits() + 1) - ulp;
-        (got as f64 - exact).abs() / spacing as f64
-    }
+    use crate::kernel::ulps;
 
     #[test]
     fn within_two_ulp_of_f64_exp() {

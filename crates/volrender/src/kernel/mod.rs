@@ -146,6 +146,15 @@ pub(crate) fn softplus_and_slope<T: Real>(x: T) -> (T, T) {
     (positive + e.ln_1p_unit(), slope)
 }
 
+/// Distance in units in the last place between an f32 and the exact (f64) value (for the
+/// inline `exp` and `ln(1 + x)` tests).
+#[cfg(test)]
+pub(crate) fn ulps(got: f32, exact: f64) -> f64 {
+    let ulp = (exact as f32).abs();
+    let spacing = f32::from_bits(ulp.to_bits() + 1) - ulp;
+    (got as f64 - exact).abs() / spacing as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
