@@ -282,6 +282,30 @@ fn a_post_activated_run_scores_its_volume_as_it_renders() {
         (volume_psnr - softer).abs() > 1e-3,
         "{volume_psnr} vs {softer}"
     );
+    // Its samples are written for other tools on a grid 3x finer unless told otherwise
+    // (`--upsample`: what other tools render of them comes closer to volgen's own renders).
+    let samples = tmp.path().join("samples");
+    ok(&volgen(&[
+        "sample",
+        path(&run),
+        "--count",
+        "1",
+        "--reconstruction",
+        "--out",
+        path(&samples),
+    ]));
+    let written = radiance_volume::RadianceVolume::load_safetensors(
+        samples.join("reconstruction.safetensors"),
+    )
+    .unwrap();
+    let want = model
+        .to_physical_upsampled(&model.reconstruct().unwrap(), 3)
+        .unwrap();
+    assert_eq!(written.dims(), want.dims());
+    let values = |v: &radiance_volume::RadianceVolume| -> Vec<f32> {
+        v.tensor().flatten_all().unwrap().to_vec1().unwrap()
+    };
+    assert_eq!(values(&written), values(&want));
 }
 
 #[test]

@@ -58,6 +58,45 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
         (3 * 36 + 4 * 2, 2 * 36 + 3 * 2)
     );
 
+    // A post-activated fit writes its files on a grid 3x finer unless told otherwise
+    // (docs/formats.md: other tools then render it as the fit does); even factors are refused.
+    let fit_post = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(format!("post/{name}.safetensors"));
+        let vdb = tmp.path().join(format!("post/{name}.vdb"));
+        let mut args = vec![
+            "fit",
+            path(&data),
+            "--size",
+            "8",
+            "--steps",
+            "5",
+            "--post-activation",
+            "--out",
+            path(&out),
+            "--vdb",
+            path(&vdb),
+        ];
+        args.extend_from_slice(extra);
+        let result = volgen(&args);
+        (result, out, vdb)
+    };
+    let (result, out3, vdb3) = fit_post("default", &[]);
+    ok(&result);
+    let fine = RadianceVolume::load_safetensors(&out3).unwrap();
+    assert_eq!(fine.dims().xyz(), [24, 24, 24]);
+    assert_vdb_matches(&fine, &vdb3);
+    let (result, out1, _) = fit_post("coarse", &["--upsample", "1"]);
+    ok(&result);
+    assert_eq!(
+        RadianceVolume::load_safetensors(&out1)
+            .unwrap()
+            .dims()
+            .xyz(),
+        [8, 8, 8]
+    );
+    let err = failure(&fit_post("even", &["--upsample", "4"]).0);
+    assert!(err.contains("--upsample") && err.contains("odd"), "{err}");
+
     // Train against it: the log has the 3D term, the run keeps a copy and records the weight.
     let run = tmp.path().join("run");
     train_micro_with(

@@ -123,6 +123,34 @@ fn demo_writes_dataset_model_samples_pictures_and_summary() {
         "same model, same seed, same scene"
     );
 
+    // --upsample K writes the same scene on a grid K times finer (K odd), in every format;
+    // VDB read back by vdb-rs. Even factors are refused by name.
+    let fine_dir = tmp.path().join("fine");
+    let sample_fine = |factor: &str| {
+        volgen(&[
+            "sample",
+            path(&out.join("run")),
+            "--count",
+            "1",
+            "--out",
+            path(&fine_dir),
+            "--vdb",
+            "--upsample",
+            factor,
+        ])
+    };
+    ok(&sample_fine("3"));
+    let fine = RadianceVolume::load_safetensors(fine_dir.join("scene_0.safetensors")).unwrap();
+    let coarse = volume.dims();
+    assert_eq!(
+        [fine.dims().d, fine.dims().h, fine.dims().w],
+        [3 * coarse.d, 3 * coarse.h, 3 * coarse.w]
+    );
+    assert_eq!(fine.aabb(), volume.aabb());
+    assert_vdb_matches(&fine, &fine_dir.join("scene_0.vdb"));
+    let err = failure(&sample_fine("2"));
+    assert!(err.contains("--upsample") && err.contains("odd"), "{err}");
+
     // A finished run resumes as a no-op; training it afresh is refused rather than overwritten.
     let dataset = out.join("dataset");
     let run = out.join("run");

@@ -144,6 +144,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let outputs = Outputs {
         vdb: cfg!(feature = "vdb"),
         exr_slices: cfg!(feature = "exr"),
+        upsample: None,
     };
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let samples = sample_to_dir(

@@ -217,7 +217,7 @@ pub fn run(args: &EditArgs) -> Result<()> {
     let harmonize_from = args.harmonize_from(&model)?;
     let cameras = showcase_cameras(args.views, model.render_size())?;
     let write = |stem: &str, raw: &candle_core::Tensor, what: String| -> Result<()> {
-        let volume = model.to_physical(raw)?;
+        let volume = args.outputs.volume(&model, raw)?;
         let views = model.render_raw(raw, &cameras)?;
         let files = write_scene(&args.out, stem, &volume, &views, args.outputs)?;
         println!("{stem}: {what} -> {}", files.display());

@@ -72,9 +72,16 @@ pub struct FitArgs {
     density_weighted_colour: bool,
     /// Render with post-activated density (DVGO's rule: samples activate the interpolated raw
     /// density, so edges can be sharper than a voxel), as a SinGRAV run trained with `--set
-    /// post_activation=true` renders. The saved volume stays physical per voxel.
+    /// post_activation=true` renders. The files hold physical density per voxel, on a grid
+    /// --upsample times finer.
     #[arg(long, conflicts_with = "density_weighted_colour")]
     post_activation: bool,
+    /// Write the volume (safetensors, VDB, EXR) on a grid K times finer per axis, K odd, so that
+    /// tools interpolating physical density render a post-activated fit as the fit renders it
+    /// (as `volgen sample --upsample`; docs/formats.md). Default: 3 with --post-activation,
+    /// else 1. The report's PSNR is the fit's own rendering either way.
+    #[arg(long, value_name = "K", value_parser = super::model_io::odd_factor)]
+    upsample: Option<usize>,
     /// Seed of the ray draws.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -261,7 +268,21 @@ fn write_outputs(
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    fitted.volume.save_safetensors(&args.out)?;
+    let upsample = args.upsample.unwrap_or(if config.post_activation {
+        super::model_io::POST_ACTIVATED_UPSAMPLE
+    } else {
+        1
+    });
+    let volume = if upsample == 1 {
+        fitted.volume.clone()
+    } else {
+        singrav::export::physical_upsampled(
+            &fitted.rendered,
+            config.density_interpolation(),
+            upsample,
+        )?
+    };
+    volume.save_safetensors(&args.out)?;
     let shown: Vec<usize> = held_out
         .iter()
         .copied()
@@ -281,7 +302,7 @@ fn write_outputs(
     let json = args.out.with_extension("fit.json");
     radiance_volume::io::write_bytes_atomic(&json, &serde_json::to_vec_pretty(report)?)?;
     if let Some(vdb) = &args.vdb {
-        write_vdb(&fitted.volume, vdb, &Encoding::default())?;
+        write_vdb(&volume, vdb, &Encoding::default())?;
     }
     if let Some(dir) = &args.exr_slices {
         let stem = args
@@ -289,7 +310,7 @@ fn write_outputs(
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "volume".into());
-        write_exr_slices(&fitted.volume, dir, &stem, &Encoding::default())?;
+        write_exr_slices(&volume, dir, &stem, &Encoding::default())?;
     }
     println!(
         "wrote {} (views: {}, report: {})",

@@ -20,6 +20,42 @@ pub struct Outputs {
     /// Also write each volume as a stack of EXR slices.
     #[arg(long)]
     pub exr_slices: bool,
+    /// Write the volumes (safetensors, VDB, EXR) on a grid K times finer per axis, K odd.
+    /// Tools that interpolate physical density (Blender, OpenVDB) render a run trained with
+    /// post-activated density (`tiny`'s default) as volgen does only on a finer grid: at 1 its
+    /// sharp edges are smeared over a voxel. Default: 3 for such runs (27x the voxels), 1 for
+    /// the others. See docs/formats.md.
+    #[arg(long, value_name = "K", value_parser = odd_factor)]
+    pub upsample: Option<usize>,
+}
+
+/// `--upsample`'s default for a run rendering post-activated density.
+pub const POST_ACTIVATED_UPSAMPLE: usize = 3;
+
+impl Outputs {
+    /// The upsampling factor for `model`'s volumes: `--upsample`, or its default.
+    pub fn upsample(&self, model: &SinGrav) -> usize {
+        self.upsample.unwrap_or(if model.config().post_activation {
+            POST_ACTIVATED_UPSAMPLE
+        } else {
+            1
+        })
+    }
+
+    /// The physical volume written for a raw volume `(1, 4, s, s, s)` of `model`, at
+    /// [`Outputs::upsample`]'s resolution.
+    pub fn volume(&self, model: &SinGrav, raw: &Tensor) -> Result<RadianceVolume> {
+        Ok(model.to_physical_upsampled(raw, self.upsample(model))?)
+    }
+}
+
+/// Parses `--upsample`: an odd factor from 1 to 9 (the finer grid keeps the model's voxel
+/// centres; 9 already makes a 71^3 grid 639^3).
+pub fn odd_factor(text: &str) -> std::result::Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(k) if k % 2 == 1 && k <= 9 => Ok(k),
+        _ => Err(format!("expected an odd factor from 1 to 9, got {text:?}")),
+    }
 }
 
 /// Loads a trained model (a run directory or its checkpoint) on the training device, noting

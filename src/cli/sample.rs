@@ -56,6 +56,7 @@ pub fn run(args: &SampleArgs) -> Result<()> {
     if args.reconstruction {
         let mut v_star = model.reconstruction_sample(&views.cameras)?;
         let files = write_sample(
+            &model,
             &args.out,
             "reconstruction",
             &mut v_star,
@@ -129,7 +130,14 @@ pub fn sample_to_dir(
     let mut samples = Vec::with_capacity(count);
     for i in 0..count {
         let mut sample = model.sample(&mut rng, &views.cameras)?;
-        let files = write_sample(dir, &format!("scene_{i}"), &mut sample, views, outputs)?;
+        let files = write_sample(
+            model,
+            dir,
+            &format!("scene_{i}"),
+            &mut sample,
+            views,
+            outputs,
+        )?;
         println!(
             "scene {i}: generated in {:.3} s -> {}",
             sample.generation_seconds,
@@ -143,6 +151,7 @@ pub fn sample_to_dir(
 /// Writes a scene rendered from `views.cameras`: the shown views as its PNG (they stay in
 /// `sample.views`), the orbit's frames, if any, as `{stem}.gif`.
 fn write_sample(
+    model: &SinGrav,
     dir: &Path,
     stem: &str,
     sample: &mut Sample,
@@ -153,7 +162,8 @@ fn write_sample(
         .map(|v| sample.views.get(v))
         .collect::<candle_core::Result<Vec<_>>>()?;
     sample.views = sample.views.narrow(0, 0, views.shown)?;
-    let files = write_scene(dir, stem, &sample.volume, &sample.views, outputs)?;
+    let volume = outputs.volume(model, &sample.raw)?;
+    let files = write_scene(dir, stem, &volume, &sample.views, outputs)?;
     if !frames.is_empty() {
         singrav::picture::write_gif(
             &dir.join(format!("{stem}.gif")),

@@ -122,6 +122,24 @@ impl Activation {
         self.apply_parts(raw, false)
     }
 
+    /// Applies the density half alone to a tensor of raw densities of any shape:
+    /// `density_scale * softplus(raw + density_shift)`, element-wise.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use radiance_volume::Activation;
+    /// let activation = Activation::default().with_density_scale(2.0).with_density_shift(-1.0);
+    /// let raw = Tensor::new(&[1f32, -30.0], &Device::Cpu)?;
+    /// let sigma: Vec<f32> = activation.apply_density(&raw)?.to_vec1()?;
+    /// assert!((sigma[0] - 2.0 * 2f32.ln()).abs() < 1e-6);
+    /// assert!(sigma[1] < 1e-12);
+    /// # Ok::<(), candle_core::Error>(())
+    /// ```
+    pub fn apply_density(&self, raw_density: &Tensor) -> Result<Tensor> {
+        let sigma = softplus(&(raw_density + f64::from(self.density_shift))?)?;
+        sigma * f64::from(self.density_scale)
+    }
+
     /// [`Activation::apply`], with channel 0 left raw unless `density`.
     fn apply_parts(&self, raw: &Tensor, density: bool) -> Result<Tensor> {
         let rank = raw.rank();
@@ -140,8 +158,7 @@ impl Activation {
         }
         let raw_density = raw.narrow(channel_dim, 0, 1)?;
         let sigma = if density {
-            let sigma = softplus(&(raw_density + f64::from(self.density_shift))?)?;
-            (sigma * f64::from(self.density_scale))?
+            self.apply_density(&raw_density)?
         } else {
             raw_density
         };

@@ -37,6 +37,7 @@ pub mod config;
 pub mod dataset;
 mod dilate;
 mod error;
+pub mod export;
 pub mod fit;
 mod io;
 pub mod metrics;

@@ -18,6 +18,9 @@ use crate::render::{ViewMaps, ViewRenderer};
 pub struct Sample {
     /// The scene as a physical volume over `[-1, 1]^3` (sigma, r, g, b).
     pub volume: RadianceVolume,
+    /// The raw volume `(1, 4, s, s, s)` it was activated from (detached), for other
+    /// activations of it such as [`SinGrav::to_physical_upsampled`].
+    pub raw: Tensor,
     /// Its renderings `(V, 3, H, W)` at the final resolution (through G_N when it is trained).
     pub views: Tensor,
     /// Seconds to generate the volume (the 3D pyramid and the activation; no rendering).
@@ -114,6 +117,7 @@ impl SinGrav {
         Ok(Sample {
             volume,
             views: self.render_raw(&raw, cameras)?,
+            raw,
             generation_seconds,
         })
     }
@@ -186,6 +190,35 @@ impl SinGrav {
             shift: config.density_shift,
         };
         Ok((RadianceVolume::new(volume, aabb)?, density))
+    }
+
+    /// The physical volume of a raw volume `(1, 4, s, s, s)` on a grid `factor` (odd) times
+    /// finer per axis, for renderers that interpolate physical density (Blender, OpenVDB
+    /// tools, volrender's `DensityInterpolation::Physical`): every fine voxel holds what the
+    /// model's own renderer computes at its centre ([`crate::export::physical_upsampled`] of
+    /// [`SinGrav::to_rendered`]). For a run trained with
+    /// [`TrainConfig::post_activation`](crate::TrainConfig::post_activation) the edges between
+    /// its voxels come back; other runs' volumes render as at 1. `factor` 1 is
+    /// [`SinGrav::to_physical`] bit for bit; even factors are refused.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
+    /// let raw = Tensor::zeros((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)?;
+    /// let fine = model.to_physical_upsampled(&raw, 3)?;
+    /// assert_eq!(fine.dims(), radiance_volume::GridDims::cube(9));
+    /// assert!(model.to_physical_upsampled(&raw, 2).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn to_physical_upsampled(&self, raw: &Tensor, factor: usize) -> Result<RadianceVolume> {
+        if factor == 1 {
+            return self.to_physical(raw);
+        }
+        let (rendered, density) = self.to_rendered(raw)?;
+        crate::export::physical_upsampled(&rendered, density, factor)
     }
 
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized

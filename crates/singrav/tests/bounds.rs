@@ -234,3 +234,73 @@ fn post_activated_volumes_render_outside_the_model_as_inside() {
     let want = model(&physical).to_physical(&raw).unwrap();
     assert_eq!(values(volume.tensor()), values(want.tensor()));
 }
+
+/// Volumes written for other tools (`volgen sample --upsample K`) are physical per voxel, and
+/// such tools interpolate physical density. On a grid K times finer (K odd), a post-activated
+/// run's volume renders that way ever closer to what the model itself renders (the sharp edges
+/// between its voxels come back), in the scene's coordinates too; a physical run's renders as
+/// the model does at every K; K = 1 is `to_physical`, even K are refused.
+#[test]
+fn finer_physical_volumes_render_as_the_model_does() {
+    use rand::{Rng, SeedableRng};
+    use singrav::render::ViewRenderer;
+    use volrender::{render, Camera, Rays, RenderConfig, Sampler};
+    // Raw densities on both sides of the activation's knee (shift -4), seeded.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let raw: Vec<f32> = (0..4 * 6 * 6 * 6)
+        .map(|_| rng.random_range(-2.0..10.0))
+        .collect();
+    let raw = Tensor::from_vec(raw, (1, 4, 6, 6, 6), &Device::Cpu).unwrap();
+    let samples = 64;
+    // The model renders in its cube; the volumes it hands out sit in the scene's box.
+    let (eye, target) = (Vec3::new(0.4, -3.2, 1.1), Vec3::new(0.0, 0.1, -0.2));
+    let camera =
+        |eye: Vec3, target: Vec3| Camera::look_at(eye, target, Vec3::Z, 16, 16, 0.7).unwrap();
+    let rms_errors = |post_activation: bool, factors: &[usize]| -> Vec<f32> {
+        let (plain, bounds, placed) = micro_and_placed(post_activation);
+        let own = ViewRenderer::new(&plain, samples, 1.0, false)
+            .render_all(&raw, &[&camera(eye, target)])
+            .unwrap();
+        // (1, 3, h, w) as (R, 3), the layout of volrender's output.
+        let own = own.rgb.flatten_from(2).unwrap().squeeze(0).unwrap();
+        let own = values(&own.t().unwrap().contiguous().unwrap());
+        let cube = bounds.cube();
+        let (centre, half) = ((cube.min + cube.max) / 2.0, bounds.half_side());
+        let rays = Rays::from_camera(&camera(centre + half * eye, centre + half * target));
+        let model = model(&placed);
+        let coarse = model.to_physical(&raw).unwrap();
+        let same = model.to_physical_upsampled(&raw, 1).unwrap();
+        assert_eq!(values(coarse.tensor()), values(same.tensor()));
+        let msg = model
+            .to_physical_upsampled(&raw, 2)
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("odd factor") && msg.contains("got 2"), "{msg}");
+        let error = |&factor: &usize| {
+            let volume = model.to_physical_upsampled(&raw, factor).unwrap();
+            assert_eq!(volume.dims(), radiance_volume::GridDims::cube(6 * factor));
+            assert_eq!(volume.aabb(), cube);
+            let cfg = RenderConfig::default()
+                .with_sampler(Sampler::Uniform { samples })
+                .with_background(placed.background)
+                .with_aabb(volume.aabb());
+            let rgb = values(&render(volume.tensor(), &rays, &cfg).unwrap().rgb);
+            let sum: f32 = rgb.iter().zip(&own).map(|(a, b)| (a - b).powi(2)).sum();
+            (sum / rgb.len() as f32).sqrt()
+        };
+        factors.iter().map(error).collect()
+    };
+    let post = rms_errors(true, &[1, 3, 5, 7]);
+    assert!(
+        post[0] > 0.01,
+        "the test volume has no sub-voxel edges: {post:?}"
+    );
+    assert!(
+        post.windows(2).all(|w| w[1] < 0.7 * w[0])
+            && post[1] < 0.3 * post[0]
+            && post[3] < 0.1 * post[0],
+        "{post:?}"
+    );
+    let physical = rms_errors(false, &[1, 3]);
+    assert!(physical.iter().all(|&e| e < 1e-5), "{physical:?}");
+}

@@ -224,7 +224,7 @@ impl FitConfig {
     }
 
     /// The renderer's density rule: post-activated with the fit's activation, or physical.
-    fn density_interpolation(&self) -> DensityInterpolation {
+    pub fn density_interpolation(&self) -> DensityInterpolation {
         DensityInterpolation::post_activated_if(
             self.post_activation,
             self.activation.density_scale,
