@@ -1405,8 +1405,8 @@ mod tests {
             .with_setting("lr_decay", r#"{"at": 0.5, "factor": 0.25}"#)
             .unwrap();
         decayed.validate().unwrap();
-        // Scale 1 runs 240 iterations, scale 4 80: each decays at its own half.
-        for (n, last_full) in [(1, 119), (4, 39)] {
+        // Scale 1 runs 720 iterations, scale 4 80: each decays at its own half.
+        for (n, last_full) in [(1, 359), (4, 39)] {
             assert_eq!(decayed.learning_rate_at(n, last_full), 1e-3);
             assert_eq!(decayed.learning_rate_at(n, last_full + 1), 2.5e-4);
         }
