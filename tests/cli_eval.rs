@@ -255,7 +255,8 @@ fn small_eval<'a>(runs: &[&'a Path], data: &'a Path) -> Vec<&'a str> {
 }
 
 /// A run trained with post-activated density has V*'s volume scored the way it renders: raw
-/// density activated per sample, not the per-voxel physical density its files hold.
+/// density activated per sample, not its per-voxel physical density; its files hold physical
+/// density on a grid 3x finer, the nearer to its rendering.
 #[test]
 fn a_post_activated_run_scores_its_volume_as_it_renders() {
     let tmp = tempfile::tempdir().unwrap();

@@ -87,12 +87,26 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     assert_vdb_matches(&fine, &vdb3);
     let (result, out1, _) = fit_post("coarse", &["--upsample", "1"]);
     ok(&result);
+    let coarse = RadianceVolume::load_safetensors(&out1).unwrap();
+    assert_eq!(coarse.dims().xyz(), [8, 8, 8]);
+    // The same seeded fit: every third fine voxel sits on a coarse centre and holds its
+    // physical value (density activated from the raw grid, colour as it is).
+    let values =
+        |v: &RadianceVolume| -> Vec<f32> { v.tensor().flatten_all().unwrap().to_vec1().unwrap() };
+    let (fine_values, coarse_values) = (values(&fine), values(&coarse));
+    for (i, &want) in coarse_values.iter().enumerate() {
+        let (c, z, y, x) = (i / 512, i / 64 % 8, i / 8 % 8, i % 8);
+        let got = fine_values[((c * 24 + 3 * z + 1) * 24 + 3 * y + 1) * 24 + 3 * x + 1];
+        assert!(
+            (got - want).abs() <= 1e-5 * (1.0 + want.abs()),
+            "channel {c} voxel ({z}, {y}, {x}): {got} vs {want}"
+        );
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out3.with_extension("fit.json")).unwrap()).unwrap();
     assert_eq!(
-        RadianceVolume::load_safetensors(&out1)
-            .unwrap()
-            .dims()
-            .xyz(),
-        [8, 8, 8]
+        (report["size"].clone(), report["upsample"].clone()),
+        (8.into(), 3.into())
     );
     let err = failure(&fit_post("even", &["--upsample", "4"]).0);
     assert!(err.contains("--upsample") && err.contains("odd"), "{err}");

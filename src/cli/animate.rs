@@ -68,8 +68,8 @@ pub fn run(args: &AnimateArgs) -> Result<()> {
     for t in 0..args.frames {
         let started = Instant::now();
         let raw = animation.next_frame()?;
-        let volume = args.outputs.volume(&model, &raw)?;
         let seconds = started.elapsed().as_secs_f64();
+        let volume = args.outputs.volume(&model, &raw)?;
         let views = model.render_raw(&raw, &camera)?;
         let files = write_scene(
             &args.out,

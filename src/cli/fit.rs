@@ -1,5 +1,5 @@
 //! `volgen fit DATASET --size N --out VOLUME.safetensors [--vdb FILE] [--exr-slices DIR]
-//! [--steps K | --seconds T] [--holdout N]`: reconstruct a dataset's scene directly as one
+//! [--steps K | --seconds T] [--holdout N] [--post-activation] [--upsample K]`: reconstruct a dataset's scene directly as one
 //! radiance volume (no networks), report PSNR on training and held-out views, and write the
 //! volume as `volgen sample` writes scenes.
 
@@ -13,6 +13,7 @@ use singrav::fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, Fi
 use singrav::TrainConfig;
 
 use super::export::{write_exr_slices, write_vdb, Encoding};
+use super::model_io::default_upsample;
 use super::train::{load_dataset, scene_bounds};
 
 /// Arguments of `volgen fit`.
@@ -92,6 +93,8 @@ pub struct FitArgs {
 struct FitReport<'a> {
     dataset: &'a Path,
     size: usize,
+    /// How many times finer per axis than `size` the written volume is (`--upsample`).
+    upsample: usize,
     /// Whether the volume was fitted (and is scored) with post-activated density.
     post_activation: bool,
     steps: usize,
@@ -165,6 +168,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let report = FitReport {
         dataset: &args.dataset,
         size: config.size,
+        upsample: args
+            .upsample
+            .unwrap_or_else(|| default_upsample(config.post_activation)),
         post_activation: config.post_activation,
         steps: fitted.steps,
         seconds: fitted.seconds,
@@ -268,18 +274,13 @@ fn write_outputs(
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let upsample = args.upsample.unwrap_or(if config.post_activation {
-        super::model_io::POST_ACTIVATED_UPSAMPLE
-    } else {
-        1
-    });
-    let volume = if upsample == 1 {
+    let volume = if report.upsample == 1 {
         fitted.volume.clone()
     } else {
         singrav::export::physical_upsampled(
             &fitted.rendered,
             config.density_interpolation(),
-            upsample,
+            report.upsample,
         )?
     };
     volume.save_safetensors(&args.out)?;

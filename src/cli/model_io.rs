@@ -29,17 +29,21 @@ pub struct Outputs {
     pub upsample: Option<usize>,
 }
 
-/// `--upsample`'s default for a run rendering post-activated density.
-pub const POST_ACTIVATED_UPSAMPLE: usize = 3;
+/// `--upsample`'s default: 3 for volumes rendered with post-activated density (their edges
+/// then survive other tools' interpolation of physical density), 1 for the others.
+pub fn default_upsample(post_activation: bool) -> usize {
+    if post_activation {
+        3
+    } else {
+        1
+    }
+}
 
 impl Outputs {
     /// The upsampling factor for `model`'s volumes: `--upsample`, or its default.
     pub fn upsample(&self, model: &SinGrav) -> usize {
-        self.upsample.unwrap_or(if model.config().post_activation {
-            POST_ACTIVATED_UPSAMPLE
-        } else {
-            1
-        })
+        self.upsample
+            .unwrap_or_else(|| default_upsample(model.config().post_activation))
     }
 
     /// The physical volume written for a raw volume `(1, 4, s, s, s)` of `model`, at

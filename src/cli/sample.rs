@@ -162,6 +162,8 @@ fn write_sample(
         .map(|v| sample.views.get(v))
         .collect::<candle_core::Result<Vec<_>>>()?;
     sample.views = sample.views.narrow(0, 0, views.shown)?;
+    // At factor 1 this activates the raw volume again (as `sample.volume` was made): a
+    // millisecond, against one path for every factor.
     let volume = outputs.volume(model, &sample.raw)?;
     let files = write_scene(dir, stem, &volume, &sample.views, outputs)?;
     if !frames.is_empty() {

@@ -39,7 +39,7 @@ pub struct TrainArgs {
 /// Training settings shared by `train` and `demo`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct TrainOptions {
-    /// Preset: paper (GPU), small, tiny (about ten minutes on 2 cores) or micro (seconds).
+    /// Preset: paper (GPU), small, tiny (about six minutes on 2 cores) or micro (seconds).
     #[arg(long, default_value = "tiny")]
     pub preset: String,
     /// Continue a killed run from its last checkpoint.

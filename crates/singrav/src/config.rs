@@ -221,8 +221,9 @@ pub struct TrainConfig {
     /// ([`volrender::DensityInterpolation::PostActivated`], DVGO's rule): samples interpolate
     /// the raw density and activate it each, so a voxel grid holds edges sharper than its
     /// voxels. `false` (the paper's renderer, and runs made before it existed): the voxels'
-    /// physical densities are interpolated. Exported volumes hold per-voxel physical densities
-    /// either way.
+    /// physical densities are interpolated. Exported volumes hold physical density either way;
+    /// `volgen sample --upsample` writes post-activated runs' on a finer grid
+    /// ([`SinGrav::to_physical_upsampled`](crate::SinGrav::to_physical_upsampled)).
     #[serde(default)]
     pub post_activation: bool,
     /// Ablation switch: the SWD loss at the last scale.
@@ -350,12 +351,13 @@ fn uniform_schedule(iterations: usize, scales: usize) -> Vec<ScaleSchedule> {
 /// Iterations per scale of the `tiny` preset. The coarsest scale, which is cheap and forms the
 /// scene's layout, trains longest: 720 instead of 240 iterations hold the layouts nearer the
 /// scene's (with post-activated density: the stones' floaters -18% and colour drift -8%, at
-/// Diversity-MV 0.152, about 1 minute more). The two finer 3D scales, where V* and the samples'
+/// Diversity-MV 0.152; 44 s more in the demo's timing). The two finer 3D scales, where V* and the samples'
 /// sharpness gain most, train 480 each (they had 160 and 240: V*'s volume +0.6 and +0.4 dB).
 /// docs/training.md has the tables and times.
 const TINY_ITERATIONS: [usize; 4] = [720, 480, 480, 80];
 
-/// Iterations per scale of the `small` preset: `tiny`'s coarse scales, then fewer where an
+/// Iterations per scale of the `small` preset: 240 and 160 at the coarse scales (`tiny`'s of
+/// an earlier day; `small` was not measured with `tiny`'s longer ones), then fewer where an
 /// iteration costs most (3.6 s at 57^3, 5.9 s for the upsampler at 216^2 on 2 cores), so the
 /// preset trains in under 20 minutes (docs/training.md, "`small` in 20 minutes").
 const SMALL_ITERATIONS: [usize; 5] = [240, 160, 160, 80, 40];
@@ -521,13 +523,15 @@ impl TrainConfig {
     /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
     ///   generated views.
     /// - `small`: N = 5, volumes 24..57, renderings 32..108 (final 216^2), 16 channels,
-    ///   `tiny`'s training recipe with fewer iterations at the costly fine scales; under 20
+    ///   `tiny`'s training recipe with a shorter schedule of its own (fewest iterations at
+    ///   the costly fine scales); under 20
     ///   minutes on 2 CPU cores.
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
     ///   5x the paper's, the samples' height profile, optimised reconstruction noise z*_n, and
     ///   the binary-opacity prior with the chroma-distribution loss on its samples (all
-    ///   measured in docs/training.md); about seven minutes of training on 2 CPU cores.
+    ///   measured in docs/training.md); about five and a half minutes of training on 2 CPU
+    ///   cores.
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds); dense finer scale.
     ///
     /// Every preset but `micro` runs its finer 3D scales on the active set, shell included

@@ -13,6 +13,8 @@ use crate::error::{invalid, Result};
 /// [`DensityInterpolation::PostActivated`] that is channel 0's raw density interpolated, then
 /// activated, so an edge that falls inside a coarse voxel stays within a fine voxel (written per
 /// coarse voxel it is smeared over a whole one); colour and physical density are interpolated.
+/// (A renderer with density-weighted colour blends colour otherwise; the file holds colour
+/// interpolated on its own, which is what the tools reading it do.)
 ///
 /// `factor` must be odd: then the fine voxel centres include the coarse ones, so trilinear
 /// interpolation over the fine grid reproduces the coarse grid's trilinear colour exactly and

@@ -3,6 +3,7 @@
 //!
 //! - [`scenes`]: built-in procedural scenes (stones, mushrooms, islands), so the project needs
 //!   no download; [`dataset`] renders them into, and loads, NeRF-style RGB-D datasets.
+//! - [`export`]: volumes for tools that interpolate physical density, on finer grids.
 //! - [`fit`]: a direct fit of one radiance volume to a dataset (no networks), in about a minute.
 //! - [`TrainConfig`]: presets (`paper`, `small`, `tiny`, `micro`) and ablation switches.
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
@@ -25,7 +26,9 @@
 //! if let TrainOutcome::Finished(model) = outcome {
 //!     let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
 //!     let scene = model.sample(&mut rand::rng(), &cameras)?;
-//!     scene.volume.save_safetensors("scene.safetensors")?;
+//!     // Physical density per voxel, 3x finer: other tools then render `tiny`'s
+//!     // post-activated edges as volgen does (`scene.volume` is the model's own grid).
+//!     model.to_physical_upsampled(&scene.raw, 3)?.save_safetensors("scene.safetensors")?;
 //! }
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```

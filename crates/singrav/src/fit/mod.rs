@@ -109,8 +109,9 @@ pub struct FitConfig {
     /// Render with post-activated density (volrender's `DensityInterpolation::PostActivated`
     /// with `activation`'s scale and shift, DVGO's rule): samples activate the interpolated raw
     /// density, so the grid holds edges sharper than its voxels. The fit then optimises and
-    /// renders raw density ([`FittedVolume::rendered`]); its saved volume stays physical per
-    /// voxel.
+    /// renders raw density ([`FittedVolume::rendered`]); [`FittedVolume::volume`] stays
+    /// physical per voxel (`volgen fit` writes it 3x finer by default,
+    /// [`crate::export::physical_upsampled`]).
     pub post_activation: bool,
 }
 
@@ -224,6 +225,14 @@ impl FitConfig {
     }
 
     /// The renderer's density rule: post-activated with the fit's activation, or physical.
+    ///
+    /// ```
+    /// use singrav::fit::FitConfig;
+    /// let config = FitConfig { post_activation: true, ..FitConfig::default() };
+    /// let [scale, shift] = config.density_interpolation().post_activation().unwrap();
+    /// assert_eq!((scale, shift), (config.activation.density_scale, config.activation.density_shift));
+    /// assert!(FitConfig::default().density_interpolation().post_activation().is_none());
+    /// ```
     pub fn density_interpolation(&self) -> DensityInterpolation {
         DensityInterpolation::post_activated_if(
             self.post_activation,
