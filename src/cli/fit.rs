@@ -1,7 +1,7 @@
 //! `volgen fit DATASET --size N --out VOLUME.safetensors [--vdb FILE] [--exr-slices DIR]
-//! [--steps K | --seconds T] [--holdout N] [--post-activation] [--upsample K]`: reconstruct a dataset's scene directly as one
-//! radiance volume (no networks), report PSNR on training and held-out views, and write the
-//! volume as `volgen sample` writes scenes.
+//! [--steps K | --seconds T] [--holdout N] [--post-activation] [--upsample K]`: reconstruct a
+//! dataset's scene directly as one radiance volume (no networks), report PSNR on training and
+//! held-out views, and write the volume as `volgen sample` writes scenes.
 
 use std::path::{Path, PathBuf};
 
