@@ -153,6 +153,18 @@ fn micro_and_placed(
     (plain, bounds, placed)
 }
 
+/// A seeded raw volume `(1, 4, 6, 6, 6)` with values on both sides of the activation's knee
+/// (raw 4 at the presets' shift -4), where interpolating raw and physical densities differ
+/// most.
+fn raw_around_the_knee(seed: u64) -> Tensor {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let raw: Vec<f32> = (0..4 * 6 * 6 * 6)
+        .map(|_| rng.random_range(-2.0..10.0))
+        .collect();
+    Tensor::from_vec(raw, (1, 4, 6, 6, 6), &Device::Cpu).unwrap()
+}
+
 /// An untrained model of `config` (its volumes come from the tests' raw tensors).
 fn model(config: &singrav::TrainConfig) -> singrav::SinGrav {
     use rand::SeedableRng;
@@ -189,7 +201,7 @@ fn post_activated_volumes_render_outside_the_model_as_inside() {
     let (plain, bounds, placed) = micro_and_placed(true);
     // Raw densities around the activation's knee (shift -4), where interpolating raw and
     // physical values differ most.
-    let raw = (Tensor::randn(0f32, 3.0, (1, 4, 6, 6, 6), &Device::Cpu).unwrap() + 4.0).unwrap();
+    let raw = raw_around_the_knee(3);
     let samples = 48;
     let camera =
         |eye: Vec3, target: Vec3| Camera::look_at(eye, target, Vec3::Z, 8, 8, 0.7).unwrap();
@@ -242,15 +254,9 @@ fn post_activated_volumes_render_outside_the_model_as_inside() {
 /// the model does at every K; K = 1 is `to_physical`, even K are refused.
 #[test]
 fn finer_physical_volumes_render_as_the_model_does() {
-    use rand::{Rng, SeedableRng};
     use singrav::render::ViewRenderer;
     use volrender::{render, Camera, Rays, RenderConfig, Sampler};
-    // Raw densities on both sides of the activation's knee (shift -4), seeded.
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let raw: Vec<f32> = (0..4 * 6 * 6 * 6)
-        .map(|_| rng.random_range(-2.0..10.0))
-        .collect();
-    let raw = Tensor::from_vec(raw, (1, 4, 6, 6, 6), &Device::Cpu).unwrap();
+    let raw = raw_around_the_knee(7);
     let samples = 64;
     // The model renders in its cube; the volumes it hands out sit in the scene's box.
     let (eye, target) = (Vec3::new(0.4, -3.2, 1.1), Vec3::new(0.0, 0.1, -0.2));
