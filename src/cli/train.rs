@@ -95,19 +95,22 @@ pub struct TrainOptions {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Also compare every 3D scale's reconstruction in 3D with this directly fitted volume
-    /// (from `volgen fit`; copied into the run).
+    /// (from `volgen fit`; copied into the run) instead of fitting one.
     #[arg(long, value_name = "VOLUME", conflicts_with = "fit")]
     pub fitted: Option<PathBuf>,
-    /// Fit a volume to the dataset first (`volgen fit` at twice the finest 3D scale's edge,
-    /// written to RUN/fitted.safetensors) and train against it as --fitted does.
+    /// Fit a volume to the dataset first (`volgen fit` at twice the finest 3D scale's edge, or
+    /// at that edge for post-activated runs; written to RUN/fitted.safetensors) and train
+    /// against it as --fitted does. A configuration that compares with a fitted volume (`--set
+    /// lambda_fitted=W`) does this without the flag.
     #[arg(long)]
     pub fit: bool,
     /// Steps of the fit --fit runs (default: `volgen fit`'s).
     #[arg(long, value_name = "K", requires = "fit")]
     pub fit_steps: Option<usize>,
-    /// Weight of the fitted-volume comparison (with --fitted or --fit).
-    #[arg(long, value_name = "W", default_value_t = DEFAULT_LAMBDA_FITTED)]
-    pub lambda_fitted: f64,
+    /// Weight of the fitted-volume comparison (default: the configuration's; with --fitted or
+    /// --fit on one without, 10).
+    #[arg(long, value_name = "W")]
+    pub lambda_fitted: Option<f64>,
     /// Weight of a 3D patch critic's adversarial term at every 3D scale: it judges generated
     /// volumes against the fitted volume (needs --fitted or --fit; --lambda-fitted 0 keeps the
     /// critic without the 3D comparison of the reconstruction). Default 0: no 3D critic.
@@ -144,7 +147,8 @@ pub struct TrainOptions {
     pub holdout: Option<usize>,
 }
 
-/// The fitted-volume weight `--fitted` and `--fit` use unless told otherwise.
+/// The fitted-volume weight `--fitted` and `--fit` use on a preset without one, unless told
+/// otherwise.
 pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
 
 /// ConSinGAN's learning-rate factor per scale down (its `lr_scale`).
@@ -189,8 +193,10 @@ impl TrainOptions {
             config.lambda_opacity_distribution = 0.0;
         }
         config.seed = self.seed;
-        if self.fitted.is_some() || self.fit {
-            config.lambda_fitted = self.lambda_fitted;
+        if let Some(weight) = self.lambda_fitted {
+            config.lambda_fitted = weight;
+        } else if (self.fitted.is_some() || self.fit) && config.lambda_fitted == 0.0 {
+            config.lambda_fitted = DEFAULT_LAMBDA_FITTED;
         }
         if let Some(weight) = self.lambda_volume_critic {
             config.lambda_volume_critic = weight;
@@ -217,14 +223,16 @@ impl TrainOptions {
     }
 
     /// How the run goes beside its configuration: resume or not, the VGG-19 weights.
-    /// With `--fit`, runs the fit into `run_dir` (unless resuming a run that has its copy).
+    /// With `--fit`, or a configuration that compares with a fitted volume and no `--fitted`,
+    /// runs the fit into `run_dir` (unless resuming a run that has its copy).
     pub fn run_options(
         &self,
         config: &TrainConfig,
         dataset: &Dataset,
         run_dir: &Path,
     ) -> Result<RunOptions> {
-        let fitted_volume = match (&self.fitted, self.fit) {
+        let needs_fit = config.lambda_fitted > 0.0 || config.lambda_volume_critic > 0.0;
+        let fitted_volume = match (&self.fitted, self.fit || needs_fit) {
             (Some(path), _) => Some(path.clone()),
             (None, true) => Some(fit_for_training(
                 config,
@@ -244,8 +252,9 @@ impl TrainOptions {
     }
 }
 
-/// Fits `dataset`'s training views at twice the finest 3D scale's edge into `run_dir/fitted.safetensors`, or
-/// reuses the file there when resuming.
+/// Fits `dataset`'s training views into `run_dir/fitted.safetensors` as
+/// [`singrav::fit::FitConfig::for_training`] says (with a progress bar), or reuses the file
+/// there when resuming.
 fn fit_for_training(
     config: &TrainConfig,
     steps: Option<usize>,
@@ -257,21 +266,10 @@ fn fit_for_training(
     if resume && path.exists() {
         return Ok(path);
     }
-    let size = 2 * config.volume_sizes.last().copied().unwrap_or(16);
-    let defaults = singrav::fit::FitConfig::default();
+    let defaults = singrav::fit::FitConfig::for_training(config);
+    let size = defaults.size;
     let fit_config = singrav::fit::FitConfig {
-        size,
-        activation: config.activation(),
-        background: config.background,
-        use_depth: config.use_depth,
-        seed: config.seed,
-        colour_interpolation: config.colour_interpolation(),
-        post_activation: config.post_activation,
         budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
-        // In the scene's coordinates, over the model's cube there.
-        aabb: config
-            .bounds
-            .map_or(radiance_volume::Aabb::CUBE, |bounds| bounds.cube()),
         ..defaults
     };
     // The fit sees only the views training sees, so held-out views stay held out.
@@ -543,5 +541,16 @@ mod tests {
             .config();
         let message = format!("{:#}", zero.unwrap_err());
         assert!(message.contains("concurrent"), "{message}");
+    }
+
+    #[test]
+    fn the_fitted_weight_is_the_configurations_else_10_with_a_fitted_volume() {
+        assert_eq!(config(&["--preset", "tiny"]).lambda_fitted, 0.0);
+        let fit = config(&["--preset", "tiny", "--fit"]);
+        assert_eq!(fit.lambda_fitted, super::DEFAULT_LAMBDA_FITTED);
+        let fitted = config(&["--fitted", "v.safetensors", "--lambda-fitted", "3"]);
+        assert_eq!(fitted.lambda_fitted, 3.0);
+        let set = config(&["--fit", "--set", "lambda_fitted=2"]);
+        assert_eq!(set.lambda_fitted, 2.0, "--set comes after the flags");
     }
 }

@@ -85,9 +85,11 @@ pub struct TrainConfig {
     /// Weight of the sliced Wasserstein texture loss at the last scale.
     pub lambda_swd: f64,
     /// Weight of the 3D comparison of every 3D scale's reconstruction V*_n with a directly
-    /// fitted volume (see [`crate::fit`]) resampled to that scale: opacity per voxel and
-    /// opacity-weighted colour. 0 (every preset's default, and what runs made before it existed
-    /// used) is the paper's image-only training.
+    /// fitted volume (see [`crate::fit`]) resampled to that scale: opacity per voxel (raw
+    /// density, with [`TrainConfig::post_activation`]) and opacity-weighted colour. 0 (every
+    /// preset's default, and what runs made before it existed used) is the paper's image-only
+    /// training. A run with a positive weight and no fitted volume given fits one
+    /// first ([`crate::fit::FitConfig::for_training`]).
     #[serde(default)]
     pub lambda_fitted: f64,
     /// Weight of the 3D patch critic's adversarial term at every 3D scale (3inGAN trains with

@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::config::Concurrent;
 use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+use singrav::fit::{fit_volume, FitConfig};
 use singrav::scenes::StandingStones;
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{Error, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
@@ -313,6 +314,36 @@ fn same_seed_same_weights_other_seed_other_weights() {
         x != y
     };
     assert!(differs("z_star") && differs("g1.tail.weight"));
+}
+
+#[test]
+fn a_run_that_compares_with_a_fitted_volume_and_has_none_fits_one_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let config = TrainConfig {
+        lambda_fitted: 1.0,
+        post_activation: true,
+        ..micro().with_scales(2).unwrap()
+    };
+    let run = tmp.path().join("run");
+    let (_, steps) = run_to_end(&config, &data, &run);
+    let three_d = config.volume_sizes.len();
+    assert!(steps
+        .iter()
+        .all(|(n, losses)| losses.fitted.is_some() == (*n <= three_d)));
+    // The run's copy is the fit `FitConfig::for_training` describes: post-activated, so on the
+    // finest 3D scale's own grid.
+    let copy =
+        radiance_volume::RadianceVolume::load_safetensors(run.join("fitted.safetensors")).unwrap();
+    let fit_config = FitConfig::for_training(&config);
+    assert_eq!(fit_config.size, *config.volume_sizes.last().unwrap());
+    let all: Vec<usize> = (0..data.len()).collect();
+    let direct = fit_volume(&data, &all, &fit_config, &mut |_| {}).unwrap();
+    assert_eq!(copy.dims(), direct.volume.dims());
+    assert_eq!(
+        largest_difference(copy.tensor(), direct.volume.tensor()),
+        0.0
+    );
 }
 
 #[test]

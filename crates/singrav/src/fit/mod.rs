@@ -149,6 +149,41 @@ impl Default for FitConfig {
 }
 
 impl FitConfig {
+    /// The fit a training run compares with ([`TrainConfig::lambda_fitted`]) when it is given
+    /// none: the run's activation, density and colour rules, background, depth and seed, over
+    /// the model's cube (in the scene's coordinates under the run's `bounds`), with this
+    /// module's default budget. The grid is the finest 3D scale's own edge for post-activated
+    /// runs, which compare raw density (resampling a finer grid would average it away from the
+    /// direct fit of that grid), and twice it otherwise (per-voxel opacity resampled from a
+    /// finer grid is a smoother target).
+    ///
+    /// ```
+    /// use singrav::{fit::FitConfig, TrainConfig};
+    /// let tiny = TrainConfig::preset("tiny")?;
+    /// let fit = FitConfig::for_training(&tiny);
+    /// assert_eq!(fit.size, 28);
+    /// assert!(fit.post_activation);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn for_training(config: &TrainConfig) -> Self {
+        let finest = config.volume_sizes.last().copied().unwrap_or(16);
+        Self {
+            size: if config.post_activation {
+                finest
+            } else {
+                2 * finest
+            },
+            activation: config.activation(),
+            background: config.background,
+            use_depth: config.use_depth,
+            seed: config.seed,
+            colour_interpolation: config.colour_interpolation(),
+            post_activation: config.post_activation,
+            aabb: config.bounds.map_or(Aabb::CUBE, |bounds| bounds.cube()),
+            ..Self::default()
+        }
+    }
+
     /// Checks the settings, naming the first that is out of range.
     pub fn validate(&self) -> Result<()> {
         let checks = [

@@ -4,16 +4,29 @@
 
 use std::path::Path;
 
-use candle_core::{Device, Tensor};
-use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume};
+use candle_core::{DType, Device, Tensor};
+use radiance_volume::{resample_tensor, Aabb, Activation, GridDims, RadianceVolume};
+use volrender::DensityInterpolation;
 
 use crate::error::{invalid, Result};
 
-/// The fitted volume at one scale's size, as opacity per voxel and opacity-weighted colour.
+/// The range raw density is compared over in post-activated runs. Beyond it a voxel renders the
+/// same (with every preset's activation, `25 softplus(raw - 4)`, raw -8 is empty to 1e-4 of
+/// opacity across a `tiny` voxel and raw 16 opaque), but where an edge falls between two voxels
+/// still depends on the empty one's raw value: the stones' 28^3 post-activated fit clamped to
+/// [-4, 12] renders 1.5 dB below itself, clamped to [-8, 16] 0.02 dB (0.2 and 0.0 dB on the
+/// scene made in Blender).
+const RAW_DENSITY_RANGE: (f64, f64) = (-8.0, 16.0);
+
+/// The fitted volume at one scale's size, as opacity per voxel (or, for post-activated runs,
+/// raw density) and opacity-weighted colour.
 ///
-/// Both are compared rather than density and colour themselves: opacity across a voxel,
+/// Opacity is compared rather than density itself: opacity across a voxel,
 /// `1 - exp(-sigma * voxel)`, is bounded (a stone's sigma of 200 and one of 2000 look the same),
-/// and colour only matters where there is matter to see.
+/// and colour only matters where there is matter to see. A post-activated run's renderer
+/// interpolates raw density, and where between two voxels an edge falls depends on both raw
+/// values even where each voxel's opacity is 0 or 1, so those runs compare raw density over
+/// [`RAW_DENSITY_RANGE`] instead.
 #[derive(Debug, Clone)]
 pub(super) struct FittedTarget {
     /// `(1, 1, s, s, s)`.
@@ -22,6 +35,29 @@ pub(super) struct FittedTarget {
     weighted_rgb: Tensor,
     /// The model's voxel edge at this scale.
     voxel: f64,
+    /// Post-activated runs: `(1, 1, s, s, s)`, the fitted raw density in the model's units,
+    /// clamped to [`RAW_DENSITY_RANGE`], resampled as the renderer interpolates it.
+    raw_density: Option<Tensor>,
+}
+
+/// The raw density whose activation by `[scale, shift]` is `volume`'s physical density, in
+/// the units of the model's cube `[-1, 1]^3`, clamped to [`RAW_DENSITY_RANGE`] (softplus never
+/// reaches 0, so empty voxels have no raw value but the floor) and resampled to `size`.
+fn raw_density_target(
+    volume: &RadianceVolume,
+    size: usize,
+    [scale, shift]: [f32; 2],
+) -> Result<Tensor> {
+    // Density is per unit length: the fit's box has edge `L`, the model's cube edge 2.
+    let to_model = f64::from(volume.aabb().size().min_element()) / 2.0;
+    let y =
+        (volume.tensor().narrow(0, 0, 1)?.to_dtype(DType::F64)? * (to_model / f64::from(scale)))?;
+    // softplus^-1(y) = ln(e^y - 1), in f64 so that small densities keep their digits.
+    let raw = ((y.exp()? - 1.0)?.log()? - f64::from(shift))?;
+    let raw = raw
+        .clamp(RAW_DENSITY_RANGE.0, RAW_DENSITY_RANGE.1)?
+        .to_dtype(DType::F32)?;
+    Ok(resample_tensor(&raw, GridDims::cube(size))?.unsqueeze(0)?)
 }
 
 /// Per-voxel opacity of a physical density `(.., 1, s, s, s)` across a voxel of edge `voxel`.
@@ -30,8 +66,14 @@ fn voxel_opacity(sigma: &Tensor, voxel: f64) -> Result<Tensor> {
 }
 
 impl FittedTarget {
-    /// The target at edge `size`: `volume` resampled (trilinear, cell-centred) over the same box.
-    pub fn new(volume: &RadianceVolume, size: usize, device: &Device) -> Result<Self> {
+    /// The target at edge `size`: `volume` resampled (trilinear, cell-centred) over the same box;
+    /// `density` is the run's rule (post-activated runs compare raw density).
+    pub fn new(
+        volume: &RadianceVolume,
+        size: usize,
+        density: DensityInterpolation,
+        device: &Device,
+    ) -> Result<Self> {
         let resampled = volume.resample(GridDims::cube(size))?;
         let physical = resampled
             .tensor()
@@ -43,10 +85,17 @@ impl FittedTarget {
         let fitted_voxel = f64::from(volume.aabb().size().min_element()) / size as f64;
         let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, fitted_voxel)?;
         let weighted_rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?;
+        let raw_density = density
+            .post_activation()
+            .map(|rule| -> Result<Tensor> {
+                Ok(raw_density_target(volume, size, rule)?.to_device(device)?)
+            })
+            .transpose()?;
         Ok(Self {
             opacity,
             weighted_rgb,
             voxel: 2.0 / size as f64,
+            raw_density,
         })
     }
 
@@ -79,16 +128,26 @@ impl FittedTarget {
         Ok(Tensor::cat(&[&opacity, &rgb], 1)?)
     }
 
-    /// The mean squared difference of opacity plus that of opacity-weighted colour, the
-    /// reconstruction's colour weighted by the *fitted* opacity (so that colour in what should
-    /// be empty space costs nothing), for a raw `(1, 4, s, s, s)` reconstruction.
+    /// The mean squared difference of opacity (post-activated runs: of raw density over
+    /// [`RAW_DENSITY_RANGE`]) plus that of opacity-weighted colour, the reconstruction's colour
+    /// weighted by the *fitted* opacity (so that colour in what should be empty space costs
+    /// nothing), for a raw `(1, 4, s, s, s)` reconstruction.
     pub fn loss(&self, raw: &Tensor, activation: &Activation) -> Result<Tensor> {
         let physical = activation.apply(raw)?;
-        let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
+        let density_term = match &self.raw_density {
+            Some(target) => {
+                let (low, high) = RAW_DENSITY_RANGE;
+                let clamped = raw.narrow(1, 0, 1)?.clamp(low, high)?;
+                (clamped - target)?.sqr()?.mean_all()?
+            }
+            None => {
+                let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
+                (opacity - &self.opacity)?.sqr()?.mean_all()?
+            }
+        };
         let rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&self.opacity)?;
-        let opacity_term = (opacity - &self.opacity)?.sqr()?.mean_all()?;
         let colour_term = (rgb - &self.weighted_rgb)?.sqr()?.mean_all()?;
-        Ok((opacity_term + colour_term)?)
+        Ok((density_term + colour_term)?)
     }
 }
 
@@ -133,7 +192,7 @@ mod tests {
             .with_density_shift(-4.0);
         let raw = Tensor::randn(0f32, 2.0, (1, 4, 6, 6, 6), &Device::Cpu)?;
         let volume = RadianceVolume::from_raw(&raw.squeeze(0)?, Aabb::CUBE, &activation)?;
-        let target = FittedTarget::new(&volume, 6, &Device::Cpu)?;
+        let target = FittedTarget::new(&volume, 6, DensityInterpolation::Physical, &Device::Cpu)?;
         let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
         assert!(same < 1e-10, "{same}");
         // What the 3D critic sees of the fitted volume and of the same raw volume generated.
@@ -148,6 +207,67 @@ mod tests {
             .loss(&(raw + 1.0)?, &activation)?
             .to_scalar::<f32>()?;
         assert!(other > 1e-3, "{other}");
+        Ok(())
+    }
+
+    #[test]
+    fn post_activated_runs_compare_raw_density_recovered_in_the_models_units() -> Result<()> {
+        let activation = Activation::default()
+            .with_density_scale(25.0)
+            .with_density_shift(-4.0);
+        let density = DensityInterpolation::post_activated_if(true, 25.0, -4.0);
+        // Raw values from -12 to 20, scattered over the grid (a fixed sequence: every run tests
+        // values beyond both ends of the range).
+        let values: Vec<f32> = (0..4 * 216)
+            .map(|i| (i as f32 * 0.618_034).fract() * 32.0 - 12.0)
+            .collect();
+        let raw = Tensor::from_vec(values, (1, 4, 6, 6, 6), &Device::Cpu)?;
+        // A fit in a scene box of edge 4 holds density per scene unit: half the model's, whose
+        // cube has edge 2.
+        let scene_box = Aabb::try_new(glam::Vec3::splat(-1.0), glam::Vec3::splat(3.0))?;
+        let physical = activation.apply(&raw.squeeze(0)?)?;
+        let in_scene_units = Tensor::cat(
+            &[
+                (physical.narrow(0, 0, 1)? * 0.5)?,
+                physical.narrow(0, 1, 3)?,
+            ],
+            0,
+        )?;
+        let volume = RadianceVolume::new(in_scene_units, scene_box)?;
+        let target = FittedTarget::new(&volume, 6, density, &Device::Cpu)?;
+        let recovered: Vec<f32> = target
+            .raw_density
+            .as_ref()
+            .expect("a post-activated target")
+            .flatten_all()?
+            .to_vec1()?;
+        let (low, high) = RAW_DENSITY_RANGE;
+        let want: Vec<f32> = raw.narrow(1, 0, 1)?.flatten_all()?.to_vec1()?;
+        assert!(want.iter().any(|&w| f64::from(w) < low - 1.0));
+        assert!(want.iter().any(|&w| f64::from(w) > high + 1.0));
+        // The f32 activation keeps about 6e-8 / softplus(raw - 4) of relative precision, so
+        // near the floor (softplus(-12) = 6e-6) raw comes back to about 1e-2.
+        for (got, want) in recovered.iter().zip(&want) {
+            let want = f64::from(*want).clamp(low, high);
+            let tolerance = 1e-3 + 1e-7 / (want - 4.0).exp().ln_1p();
+            assert!(
+                (f64::from(*got) - want).abs() < tolerance,
+                "{got} vs {want}"
+            );
+        }
+        let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
+        assert!(same < 1e-5, "{same}");
+        // Past the range nothing changes (opaque voxels made more opaque); inside it the loss
+        // sees the raw value itself, even where opacity across the voxel is already near 1.
+        let density = raw.narrow(1, 0, 1)?;
+        let beyond = (&density + ((&density - high)?.relu()? * 10.0)?)?;
+        let pushed = Tensor::cat(&[&beyond, &raw.narrow(1, 1, 3)?], 1)?;
+        let unchanged = target.loss(&pushed, &activation)?.to_scalar::<f32>()?;
+        let shifted = target
+            .loss(&(raw.clone() + 0.5)?, &activation)?
+            .to_scalar::<f32>()?;
+        assert!(unchanged < 1e-6, "{unchanged}");
+        assert!(shifted > 0.1 && shifted < 0.25, "{shifted}");
         Ok(())
     }
 

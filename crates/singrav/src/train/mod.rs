@@ -55,8 +55,10 @@ pub struct RunOptions {
     /// [`crate::SwdFeatures::Vgg19`]; required then, refused otherwise.
     pub vgg19_weights: Option<PathBuf>,
     /// A directly fitted volume (see [`crate::fit`]) for a configuration whose
-    /// `lambda_fitted` or `lambda_volume_critic` is positive; required then (unless resuming a run, which keeps its own
-    /// copy as `fitted.safetensors`), refused otherwise.
+    /// `lambda_fitted` or `lambda_volume_critic` is positive, refused otherwise. Without one
+    /// such a run fits the training views itself first
+    /// ([`crate::fit::FitConfig::for_training`]; `tiny`'s takes about 10 s), and a resumed run
+    /// uses its own copy (`fitted.safetensors`).
     pub fitted_volume: Option<PathBuf>,
     /// Test hook: before iteration `.1` (0-based) of scale `.0`, every weight of that scale's
     /// generator becomes NaN, so tests can check that a divergence stops the run at once and

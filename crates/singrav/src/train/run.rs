@@ -19,6 +19,7 @@ use crate::checkpoint::{write_config_json, Checkpoint, TrainState, CHECKPOINT_FI
 use crate::config::TrainConfig;
 use crate::dataset::Dataset;
 use crate::error::{invalid, Error, Result};
+use crate::fit::{fit_volume, FitConfig};
 use crate::model::{load_into, var_tensors, SinGrav};
 use crate::noise::step_rng;
 use crate::optim::{Adam, WeightAverage};
@@ -153,6 +154,15 @@ pub fn train(
         }
         None => dataset,
     };
+    let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
+    if options.resume && !run_dir.exists() {
+        return Err(Error::Checkpoint {
+            path: checkpoint_file,
+            why: "no checkpoint here, nor a run directory (train a model first)".into(),
+        });
+    }
+    let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
+    let fitted = load_fitted_target(config, options, run_dir, dataset)?;
     let moved;
     let dataset = match &config.bounds {
         Some(bounds) => {
@@ -161,15 +171,6 @@ pub fn train(
         }
         None => dataset,
     };
-    let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
-    let fitted = load_fitted_target(config, options, run_dir)?;
-    let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
-    if options.resume && !run_dir.exists() {
-        return Err(Error::Checkpoint {
-            path: checkpoint_file,
-            why: "no checkpoint here, nor a run directory (train a model first)".into(),
-        });
-    }
     crate::io::create_dir(run_dir)?;
     if let Some((volume, true)) = &fitted {
         volume.save_safetensors(run_dir.join(FITTED_FILE))?;
@@ -475,11 +476,13 @@ const FITTED_FILE: &str = "fitted.safetensors";
 
 /// The fitted volume a configuration with `lambda_fitted > 0` trains against, and whether it is
 /// new to the run (to be copied into it): the one `options` names, else on resume the run's
-/// copy. Errors when one is needed and missing, or given and not needed.
+/// copy, else a fit of `dataset` (the training views, in the scene's coordinates) made now as
+/// [`FitConfig::for_training`] says. Errors when one is given and not needed.
 fn load_fitted_target(
     config: &TrainConfig,
     options: &RunOptions,
     run_dir: &Path,
+    dataset: &Dataset,
 ) -> Result<Option<(RadianceVolume, bool)>> {
     let copy = run_dir.join(FITTED_FILE);
     if config.lambda_fitted == 0.0 && config.lambda_volume_critic == 0.0 {
@@ -499,14 +502,9 @@ fn load_fitted_target(
         Some(path) => (path.clone(), *path != copy),
         None if options.resume && copy.exists() => (copy, false),
         None => {
-            return Err(invalid(
-                "fitted volume",
-                format!(
-                    "lambda_fitted is {} and lambda_volume_critic {} but no fitted volume was \
-                     given (volgen: --fitted FILE or --fit)",
-                    config.lambda_fitted, config.lambda_volume_critic
-                ),
-            ))
+            let all: Vec<usize> = (0..dataset.len()).collect();
+            let fitted = fit_volume(dataset, &all, &FitConfig::for_training(config), &mut |_| {})?;
+            return Ok(Some((fitted.volume, true)));
         }
     };
     let cube = config

@@ -172,7 +172,10 @@ impl<'a> VolumeScale<'a> {
     ) -> Result<Self> {
         let size = self.config.volume_sizes[self.n - 1];
         self.fitted = fitted
-            .map(|volume| FittedTarget::new(volume, size, self.model.device()))
+            .map(|volume| {
+                let density = self.config.density_interpolation();
+                FittedTarget::new(volume, size, density, self.model.device())
+            })
             .transpose()?;
         if self.config.lambda_volume_critic > 0.0 {
             if self.fitted.is_none() {
