@@ -147,7 +147,7 @@ pub struct TrainOptions {
     pub holdout: Option<usize>,
 }
 
-/// The fitted-volume weight `--fitted` and `--fit` use on a preset without one, unless told
+/// The fitted-volume weight `--fitted` and `--fit` use on a configuration without one, unless told
 /// otherwise.
 pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
 
