@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use candle_core::{DType, Device, Tensor};
+use candle_core::{Device, Tensor};
 use radiance_volume::{resample_tensor, Aabb, Activation, GridDims, RadianceVolume};
 use volrender::DensityInterpolation;
 
@@ -40,23 +40,33 @@ pub(super) struct FittedTarget {
     raw_density: Option<Tensor>,
 }
 
-/// The raw density whose activation by `[scale, shift]` is `volume`'s physical density, in
-/// the units of the model's cube `[-1, 1]^3`, clamped to [`RAW_DENSITY_RANGE`] (softplus never
-/// reaches 0, so empty voxels have no raw value but the floor) and resampled to `size`.
+/// The raw density whose activation by `[scale, shift]` is `volume`'s physical density
+/// ([`Activation::raw_density`]), in the units of the model's cube `[-1, 1]^3`, clamped to
+/// [`RAW_DENSITY_RANGE`] (softplus never reaches 0, so empty voxels get the floor) and
+/// resampled to `size`.
 fn raw_density_target(
     volume: &RadianceVolume,
     size: usize,
     [scale, shift]: [f32; 2],
 ) -> Result<Tensor> {
+    let activation = Activation::default()
+        .with_density_scale(scale)
+        .with_density_shift(shift);
     // Density is per unit length: the fit's box has edge `L`, the model's cube edge 2.
-    let to_model = f64::from(volume.aabb().size().min_element()) / 2.0;
-    let y =
-        (volume.tensor().narrow(0, 0, 1)?.to_dtype(DType::F64)? * (to_model / f64::from(scale)))?;
-    // softplus^-1(y) = ln(e^y - 1), in f64 so that small densities keep their digits.
-    let raw = ((y.exp()? - 1.0)?.log()? - f64::from(shift))?;
-    let raw = raw
-        .clamp(RAW_DENSITY_RANGE.0, RAW_DENSITY_RANGE.1)?
-        .to_dtype(DType::F32)?;
+    let to_model = volume.aabb().size().min_element() / 2.0;
+    let (low, high) = RAW_DENSITY_RANGE;
+    let voxels = volume.dims().xyz().iter().product::<usize>();
+    let raw = volume.with_values(|values| {
+        values[..voxels]
+            .iter()
+            .map(|&sigma| match sigma * to_model {
+                empty if empty <= 0.0 => Ok(low as f32),
+                sigma => Ok(f64::from(activation.raw_density(sigma)?).clamp(low, high) as f32),
+            })
+            .collect::<Result<Vec<f32>>>()
+    })??;
+    let dims = volume.dims();
+    let raw = Tensor::from_vec(raw, (1, dims.d, dims.h, dims.w), volume.tensor().device())?;
     Ok(resample_tensor(&raw, GridDims::cube(size))?.unsqueeze(0)?)
 }
 
@@ -133,19 +143,21 @@ impl FittedTarget {
     /// weighted by the *fitted* opacity (so that colour in what should be empty space costs
     /// nothing), for a raw `(1, 4, s, s, s)` reconstruction.
     pub fn loss(&self, raw: &Tensor, activation: &Activation) -> Result<Tensor> {
-        let physical = activation.apply(raw)?;
+        let raw_sigma = raw.narrow(1, 0, 1)?;
         let density_term = match &self.raw_density {
             Some(target) => {
                 let (low, high) = RAW_DENSITY_RANGE;
-                let clamped = raw.narrow(1, 0, 1)?.clamp(low, high)?;
-                (clamped - target)?.sqr()?.mean_all()?
+                (raw_sigma.clamp(low, high)? - target)?.sqr()?.mean_all()?
             }
             None => {
-                let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
+                let sigma = activation.apply_density(&raw_sigma)?;
+                let opacity = voxel_opacity(&sigma, self.voxel)?;
                 (opacity - &self.opacity)?.sqr()?.mean_all()?
             }
         };
-        let rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&self.opacity)?;
+        // The colour half only: the density channel comes back raw and is left out.
+        let colour = activation.apply_colour(raw)?.narrow(1, 1, 3)?;
+        let rgb = colour.broadcast_mul(&self.opacity)?;
         let colour_term = (rgb - &self.weighted_rgb)?.sqr()?.mean_all()?;
         Ok((density_term + colour_term)?)
     }
