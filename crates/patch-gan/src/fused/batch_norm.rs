@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::{channels_and_plane, lane_sum, lane_sums};
+use super::{channels_and_plane, lane_sum, lane_sums, slope_at};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -155,7 +155,7 @@ impl Kernel for ForwardKernel<'_> {
                 let (scale, shift) = affine::<T>(&saved, i % channels);
                 for (d, &v) in dst.iter_mut().zip(src) {
                     let pre = v * scale + shift;
-                    *d = if pre > T::ZERO { pre } else { pre * slope };
+                    *d = pre * slope_at(pre, slope);
                 }
             });
         *lock(&self.op.saved)? = Some(saved);
@@ -276,12 +276,7 @@ impl BatchNormActGrad {
                 for n in 0..batch {
                     let at = (n * channels + c) * plane;
                     let [g, gx] = lane_sums(&x[at..][..plane], &grad[at..][..plane], |v, g| {
-                        let g = if v * scale + shift > T::ZERO {
-                            g
-                        } else {
-                            g * slope
-                        }
-                        .to_f64();
+                        let g = (g * slope_at(v * scale + shift, slope)).to_f64();
                         [g, g * (v.to_f64() - mean) * inv]
                     });
                     sum_g += g;
@@ -315,11 +310,7 @@ impl Kernel for BatchNormActGrad {
                 let offset = T::from_f64(-k * sum_g / count);
                 let (k, mean) = (T::from_f64(k), T::from_f64(mean));
                 for ((d, &v), &g) in dst.iter_mut().zip(xs).zip(gs) {
-                    let g = if v * scale + shift > T::ZERO {
-                        g
-                    } else {
-                        g * slope
-                    };
+                    let g = g * slope_at(v * scale + shift, slope);
                     *d = k * g + along_x * (v - mean) + offset;
                 }
             });

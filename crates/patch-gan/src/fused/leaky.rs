@@ -5,7 +5,7 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
 use super::channel_sum::channel_sum;
-use super::{channels_and_plane, CHUNK};
+use super::{channels_and_plane, slope_at, CHUNK};
 use crate::element::Element;
 use crate::storage::{self, Kernel};
 
@@ -99,7 +99,7 @@ impl Kernel for Leaky {
         let slope = T::from_f64(self.0);
         Ok(x.par_iter()
             .with_min_len(CHUNK)
-            .map(|&v| if v > T::ZERO { v } else { v * slope })
+            .map(|&v| v * slope_at(v, slope))
             .collect())
     }
 }
@@ -131,7 +131,7 @@ impl Kernel for LeakyGrad {
             .par_iter()
             .zip(y.par_iter())
             .with_min_len(CHUNK)
-            .map(|(&g, &y)| if y > T::ZERO { g } else { g * slope })
+            .map(|(&g, &y)| g * slope_at(y, slope))
             .collect())
     }
 }
@@ -195,7 +195,7 @@ impl Kernel for BiasLeakyKernel {
                 let b = bias[i % self.channels];
                 for (d, &v) in dst.iter_mut().zip(src) {
                     let v = v + b;
-                    *d = if v > T::ZERO { v } else { v * slope };
+                    *d = v * slope_at(v, slope);
                 }
             });
         Ok(out)
