@@ -413,12 +413,13 @@ impl storage::Kernel for Kernel {
 }
 
 /// Fewest input and output channels for which Winograd's transforms pay. Its transforms cost the
-/// same per channel whatever the width, the products it saves grow with it: measured on a
-/// 3x3x3 convolution at 21^3-40^3, 2 threads, Winograd's forward + backward took 0.65x the
-/// im2col kernel's time at 32 channels and 1.0-1.2x at 16.
-const WINOGRAD_MIN_CHANNELS: usize = 32;
+/// same per channel whatever the width, the products it saves grow with it. With F(4, 3) and
+/// the weights transformed for all channel pairs at once, a 16-channel generator step (5
+/// layers, 2 threads) took 0.67-0.70x the time with the 16-channel layers on Winograd than on
+/// im2col at 28^3 and 57^3, and a 16-channel critic step at 54^2 0.8-0.95x (docs/performance-patch-gan.md).
+const WINOGRAD_MIN_CHANNELS: usize = 16;
 
-/// Whether a convolution runs on the Winograd F(2, 3) kernel rather than the im2col one.
+/// Whether a convolution runs on the Winograd kernel rather than the im2col one.
 fn use_winograd(g: &Geometry) -> bool {
     winograd::supports(g) && g.c_in.min(g.c_out) >= WINOGRAD_MIN_CHANNELS
 }
