@@ -412,16 +412,15 @@ impl storage::Kernel for Kernel {
     }
 }
 
-/// Fewest input and output channels for which Winograd's transforms pay. Its transforms cost the
-/// same per channel whatever the width, the products it saves grow with it. With F(4, 3) and
-/// the weights transformed for all channel pairs at once, a 16-channel generator step (5
-/// layers, 2 threads) took 0.67-0.70x the time with the 16-channel layers on Winograd than on
-/// im2col at 28^3 and 57^3, and a 16-channel critic step at 54^2 0.8-0.95x (docs/performance-patch-gan.md).
-const WINOGRAD_MIN_CHANNELS: usize = 16;
-
-/// Whether a convolution runs on the Winograd kernel rather than the im2col one.
+/// Whether a convolution runs on the Winograd kernel rather than the im2col one: whenever its
+/// geometry allows. With F(4, 3), the weights transformed for all channel pairs at once and
+/// rows split into phases by vector shuffles, Winograd's transforms (3.4 values per input voxel
+/// and channel) cost less than im2col's columns (27 per output voxel and channel) at any width:
+/// a generator step at 28^3 with 16 channels took 0.89x the time with its 4-channel first and
+/// last layers on Winograd too, one with 16-channel layers 0.67-0.70x the time with those on
+/// im2col (docs/performance-patch-gan.md, 2026-11-28).
 fn use_winograd(g: &Geometry) -> bool {
-    winograd::supports(g) && g.c_in.min(g.c_out) >= WINOGRAD_MIN_CHANNELS
+    winograd::supports(g)
 }
 
 /// The gradient `compute` gives, if `arg` is part of the autograd graph (a variable or the result
