@@ -412,15 +412,20 @@ impl storage::Kernel for Kernel {
     }
 }
 
-/// Whether a convolution runs on the Winograd kernel rather than the im2col one: whenever its
-/// geometry allows. With F(4, 3), the weights transformed for all channel pairs at once and
-/// rows split into phases by vector shuffles, Winograd's transforms (3.4 values per input voxel
-/// and channel) cost less than im2col's columns (27 per output voxel and channel) at any width:
-/// a generator step at 28^3 with 16 channels took 0.89x the time with its 4-channel first and
-/// last layers on Winograd too, one with 16-channel layers 0.67-0.70x the time with those on
-/// im2col (docs/performance-patch-gan.md, 2026-11-28).
+/// Fewest input channels for which a convolution runs on the Winograd kernel. With F(4, 3), the
+/// weights transformed for all channel pairs at once and rows split into phases by vector
+/// shuffles, Winograd's transforms (3.4 values per voxel and channel) cost less than im2col's
+/// columns (27 per voxel and input channel) down to a few output channels, so the generators'
+/// 16-channel layers and their 4-channel last layer gain from it. A first layer of 3-5 input
+/// channels does not: its weight gradient would expand all its output gradients' channels for
+/// products only 4 wide. Measured on generator steps (5 layers, 2 threads; docs/performance-patch-gan.md,
+/// 2026-11-28): with the 4 -> 32 first layer on Winograd too, 0.89-0.92 s at 71^3 against
+/// 0.57-0.61 s; with the 32 -> 4 last layer on im2col, 0.65-0.68 s.
+const WINOGRAD_MIN_INPUT_CHANNELS: usize = 16;
+
+/// Whether a convolution runs on the Winograd kernel rather than the im2col one.
 fn use_winograd(g: &Geometry) -> bool {
-    winograd::supports(g)
+    winograd::supports(g) && g.c_in >= WINOGRAD_MIN_INPUT_CHANNELS
 }
 
 /// The gradient `compute` gives, if `arg` is part of the autograd graph (a variable or the result
