@@ -275,10 +275,11 @@ impl BatchNormActGrad {
                 let (mut sum_g, mut sum_gx) = (0.0, 0.0);
                 for n in 0..batch {
                     let at = (n * channels + c) * plane;
-                    let [g, gx] = lane_sums(&x[at..][..plane], &grad[at..][..plane], |v, g| {
-                        let g = (g * slope_at(v * scale + shift, slope)).to_f64();
-                        [g, g * (v.to_f64() - mean) * inv]
-                    });
+                    let (xs, gs) = (&x[at..][..plane], &grad[at..][..plane]);
+                    let masked = |v: T, g: T| (g * slope_at(v * scale + shift, slope)).to_f64();
+                    // Two sweeps: the compiler vectorises a single sum, not the pair of them.
+                    let [g] = lane_sums(xs, gs, |v, g| [masked(v, g)]);
+                    let [gx] = lane_sums(xs, gs, |v, g| [masked(v, g) * (v.to_f64() - mean) * inv]);
                     sum_g += g;
                     sum_gx += gx;
                 }
