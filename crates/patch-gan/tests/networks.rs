@@ -30,7 +30,6 @@ fn shapes(varmap: &VarMap) -> HashMap<String, Vec<usize>> {
         .collect()
 }
 
-/// Indices of the elements that differ between two equal-shaped tensors.
 /// Indices where `a` and `b` differ by more than rounding: Winograd's F(4, 3) mixes a whole
 /// tile of inputs and takes them apart again, so voxels outside the receptive field move by a
 /// few ulp (about 1e-16 relative here, against 1e-3 and more inside it).

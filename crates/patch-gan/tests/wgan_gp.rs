@@ -82,7 +82,7 @@ fn penalty_gradient_matches_finite_differences() {
 
 #[test]
 fn penalty_gradient_matches_finite_differences_through_winograd() {
-    // 32 channels in and out send the middle layer through the Winograd kernel; every 97th
+    // 32 input channels send the middle and last layers through the Winograd kernel; every 97th
     // weight is checked (all 10k would take minutes).
     support::penalty_gradient_matches_finite_differences::<2>(support::WIDE_CRITIC, 97, penalty);
 }

@@ -414,8 +414,8 @@ impl storage::Kernel for Kernel {
 
 /// Fewest input channels for which a convolution runs on the Winograd kernel. With F(4, 3), the
 /// weights transformed for all channel pairs at once and rows split into phases by vector
-/// shuffles, Winograd's transforms (3.4 values per voxel and channel) cost less than im2col's
-/// columns (27 per voxel and input channel) down to a few output channels, so the generators'
+/// shuffles, Winograd's transforms (3.4 values per voxel and channel with F(4, 3), 8 with the
+/// F(2, 3) of small volumes) cost less than im2col's columns (27 per voxel and input channel) down to a few output channels, so the generators'
 /// 16-channel layers and their 4-channel last layer gain from it. A first layer of 3-5 input
 /// channels does not: its weight gradient would expand all its output gradients' channels for
 /// products only 4 wide. Measured on generator steps (5 layers, 2 threads; docs/performance-patch-gan.md,

@@ -18,7 +18,6 @@ pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
 use crate::element::Element;
-use crate::simd::has_avx2;
 
 /// Elements per parallel task of the element-wise kernels: large enough that rayon's overhead
 /// vanishes, small enough that two threads share the work evenly.
@@ -52,11 +51,11 @@ fn lane_sums<T: Element, const K: usize>(
     f: impl Fn(T, T) -> [f64; K],
 ) -> [f64; K] {
     #[cfg(target_arch = "x86_64")]
-    if has_avx2() {
+    if crate::simd::has_avx2() {
         // SAFETY: the CPU has AVX2 (checked just above).
         return unsafe { lane_sums_avx2(a, b, f) };
     }
-    lane_sums_baseline(a, b, f)
+    lane_sums_body(a, b, f)
 }
 
 /// [`lane_sums`] compiled for AVX2 (with `f` inlined into it).
@@ -70,12 +69,12 @@ unsafe fn lane_sums_avx2<T: Element, const K: usize>(
     b: &[T],
     f: impl Fn(T, T) -> [f64; K],
 ) -> [f64; K] {
-    lane_sums_baseline(a, b, f)
+    lane_sums_body(a, b, f)
 }
 
-/// [`lane_sums`] for whichever instruction set its caller is compiled for.
+/// The body of [`lane_sums`], compiled for whichever instruction set its caller is compiled for.
 #[inline(always)]
-fn lane_sums_baseline<T: Element, const K: usize>(
+fn lane_sums_body<T: Element, const K: usize>(
     a: &[T],
     b: &[T],
     f: impl Fn(T, T) -> [f64; K],
@@ -134,6 +133,24 @@ mod tests {
                 "len {len}: {sp} vs {products}"
             );
         }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_build_of_lane_sums_gives_the_same_bits() {
+        if !crate::simd::has_avx2() {
+            return;
+        }
+        let a: Vec<f32> = (0..1003).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..1003).map(|i| 1.0 + (i as f32 * 0.11).cos()).collect();
+        let f = |x: f32, y: f32| {
+            let g = (y * slope_at(x, 0.2f32)).to_f64();
+            [g, g * (x.to_f64() - 0.3) * 1.7]
+        };
+        // SAFETY: the CPU has AVX2 (checked above).
+        let avx2 = unsafe { lane_sums_avx2(&a, &b, f) };
+        let body = lane_sums_body(&a, &b, f);
+        assert_eq!(avx2.map(f64::to_bits), body.map(f64::to_bits));
     }
 
     #[test]

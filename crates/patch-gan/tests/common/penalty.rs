@@ -18,7 +18,8 @@ pub const SMALL_CRITIC: PatchDiscriminatorConfig = PatchDiscriminatorConfig {
     in_channels: 2,
 };
 
-/// Three layers of 32 channels: the middle layer on the Winograd kernel.
+/// Three layers of 32 channels: the middle and last layers (32 input channels) on the Winograd
+/// kernel, the first (2 input channels) on im2col.
 pub const WIDE_CRITIC: PatchDiscriminatorConfig = PatchDiscriminatorConfig {
     layers: 3,
     channels: 32,

@@ -61,14 +61,6 @@ enum Tile {
 }
 
 impl Tile {
-    /// Outputs per tile along a 3-tap axis.
-    fn outs(self) -> usize {
-        match self {
-            Tile::F2 => 2,
-            Tile::F4 => 4,
-        }
-    }
-
     /// The tile for `g`: F(4, 3) once every 3-tap axis has at least 8 outputs (two tiles; below
     /// that the overhanging tile's work is too large a share), else F(2, 3).
     fn for_geometry(g: &Geometry) -> Self {
@@ -111,11 +103,12 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(g: &Geometry, tile: Tile) -> Self {
+    /// The tiling of `g` with `m` outputs per tile along its 3-tap axes (F(m, 3)).
+    fn new(g: &Geometry, m: usize) -> Self {
         let out = g.output();
         let axes = [0, 1, 2].map(|a| {
             let taps = g.kernel[a];
-            let outs = if taps == 3 { tile.outs() } else { 1 };
+            let outs = if taps == 3 { m } else { 1 };
             Axis {
                 taps,
                 outs,
@@ -465,12 +458,13 @@ fn forward_tiled<T: Element>(x: &[T], w: &[T], g: &Geometry, tile: Tile) -> Vec<
     }
 }
 
+/// [`forward`] with F(M, 3).
 fn forward_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     x: &[T],
     w: &[T],
     g: &Geometry,
 ) -> Vec<T> {
-    let plan = Plan::new(g, if M == 2 { Tile::F2 } else { Tile::F4 });
+    let plan = Plan::new(g, M);
     let u = transform_weights::<T, W, M, N>(w, g);
     let out_vox: usize = g.output().iter().product();
     let mut y = vec![T::ZERO; g.batch * g.c_out * out_vox];
@@ -584,12 +578,13 @@ fn grad_weight_tiled<T: Element>(x: &[T], grad_out: &[T], g: &Geometry, tile: Ti
     }
 }
 
+/// [`grad_weight`] with F(M, 3).
 fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     x: &[T],
     grad_out: &[T],
     g: &Geometry,
 ) -> Vec<T> {
-    let plan = Plan::new(g, if M == 2 { Tile::F2 } else { Tile::F4 });
+    let plan = Plan::new(g, M);
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
     let chunks = plan.chunks(g.batch);
     let per_block = chunks.len().div_ceil(WEIGHT_GRAD_BLOCKS).max(1);
@@ -680,9 +675,10 @@ mod tests {
             ([1, 3, 3], [0, 1, 1]),
             ([3, 1, 3], [2, 0, 1]),
         ] {
-            // Rows of 37 and 21 voxels take the (de)interleaving's blocks of 8 and 4 tiles, the
-            // others only its single tiles.
-            for input in [[5, 6, 7], [4, 4, 4], [3, 8, 5], [4, 3, 37], [3, 4, 21]] {
+            // Rows of 37 voxels take the (de)interleaving's blocks of 8 tiles with both tiles,
+            // rows of 29 its blocks of 4 (F(2, 3) after a block of 8), the others only its
+            // single tiles.
+            for input in [[5, 6, 7], [4, 4, 4], [3, 8, 5], [4, 3, 37], [3, 4, 29]] {
                 let input = [0, 1, 2].map(|a| {
                     if kernel[a] == 1 {
                         input[a].min(2)

@@ -9,7 +9,7 @@ use crate::element::Element;
 const LANES: usize = 8;
 
 /// `dst[dst_at[k] + i]` gets component `k` of `map` applied to `(srcs[0][i], srcs[1][i], ...)`
-/// for every `i < len`. `srcs` and `dst` must not overlap.
+/// for every `i < len`. The ranges `dst_at[k]..dst_at[k] + len` must lie in `dst` and not overlap.
 #[inline(always)]
 pub(super) fn map_into<T: Element, const I: usize, const O: usize>(
     srcs: [&[T]; I],
