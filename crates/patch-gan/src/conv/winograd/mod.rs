@@ -21,6 +21,9 @@
 //! sum; F(4, 3) adds ±2 (entries up to 8 and 1/24) and rounds worse, by the factor its tests
 //! state. Work is split into chunks of tiles of one batch item whose transformed inputs and
 //! products stay near the L2 cache.
+//!
+//! The 1D transforms and the weights' transform are in `minimal`, the row-wise maps and the
+//! split of rows into phases in `rows`; this module tiles a convolution and runs its passes.
 
 use gemm::Parallelism;
 use rayon::prelude::*;
@@ -799,7 +802,6 @@ mod tests {
             for pass in 0..3 {
                 let ours_err = max_rel_diff(&widen(&ours[pass]), &exact[pass]);
                 let direct_err = max_rel_diff(&widen(&direct[pass]), &exact[pass]);
-                eprintln!("{tile:?} pass {pass}: {ours_err:.2e} vs im2col {direct_err:.2e}");
                 assert!(
                     ours_err < factor * direct_err.max(1e-7),
                     "{tile:?} pass {pass}: {ours_err} vs im2col {direct_err}"
