@@ -123,7 +123,7 @@ impl Plan {
             }
         });
         let positions: usize = axes.iter().map(|a| a.ins).product();
-        let per_row = positions * (g.c_in + g.c_out) * axes[2].tiles;
+        let per_row = positions * (g.c_in + g.c_out) * (axes[2].tiles + 1);
         let rows = axes[0].tiles * axes[1].tiles;
         Self {
             axes,
@@ -133,9 +133,17 @@ impl Plan {
         }
     }
 
-    /// Tiles per chunk at most.
-    fn chunk_tiles(&self) -> usize {
-        self.chunk_rows * self.axes[2].tiles
+    /// Columns per row of tiles in the transformed matrices: the row's tiles and one more, whose
+    /// values no output reads. With it the phases of a row (below) and the matrices' rows have
+    /// one stride, so the transforms of a chunk run over all its rows at once instead of a few
+    /// tiles at a time (7 at 28^3, where short loops and scattered stores were most of a pass).
+    fn row_cols(&self) -> usize {
+        self.axes[2].tiles + 1
+    }
+
+    /// Columns of a chunk's transformed matrices at most.
+    fn chunk_cols(&self) -> usize {
+        self.chunk_rows * self.row_cols()
     }
 
     /// Work items: `(batch item, first row, rows)`.
@@ -153,38 +161,31 @@ impl Plan {
     fn row_tiles(&self, row: usize) -> (usize, usize) {
         (row / self.axes[1].tiles, row % self.axes[1].tiles)
     }
-
-    /// Length of a row of input voxels covering a row of tiles (with the padding):
-    /// `m (tiles + 1)`, stored in `m` phases of `tiles + 1` (phase `p` holds the padded row's
-    /// voxels `m k + p`), so that the W transform, whose tiles step by `m`, reads every operand
-    /// with unit stride and vectorises.
-    fn input_width(&self) -> usize {
-        self.axes[2].outs * (self.axes[2].tiles + 1)
-    }
-
-    /// Length of a row of outputs of a row of tiles (the last tile may overhang the output):
-    /// `m tiles`, in `m` phases of `tiles` like the input rows.
-    fn output_width(&self) -> usize {
-        self.axes[2].outs * self.axes[2].tiles
-    }
 }
 
-/// Per-task buffers of rows of voxels, reused across chunks.
+/// Per-task buffers of a chunk's rows of voxels, reused across chunks. A row holds, for one
+/// `(D, H)` offset in the tiles, the voxels along W of every row of tiles of the chunk, split
+/// into `M` phases of [`Plan::row_cols`] values per row of tiles: phase `p` holds the voxels
+/// `M k + p`, so that the W transform, whose tiles step by `M`, reads every operand with unit
+/// stride and vectorises.
 struct RowBuffers<T> {
     a: Vec<T>,
     b: Vec<T>,
 }
 
 impl<T: Element> RowBuffers<T> {
-    /// Length of each of the two buffers for `plan`.
+    /// Length of each of the two buffers for `plan`: one value past the rows, which the W
+    /// transform of F(2, 3) reads for the unused column of the last row.
     fn len(plan: &Plan) -> usize {
-        plan.positions.max(16) * plan.input_width().max(plan.output_width())
+        let [ad, ah, aw] = plan.axes;
+        ad.ins * ah.ins * aw.outs * plan.chunk_cols() + 1
     }
 }
 
-/// Fills `v` (`positions x C_in x tiles` of the chunk, tiles in row order) with the chunk's
-/// input tiles transformed by `B^T`: per channel and row of tiles, the rows of voxels under it
-/// (zeros in the padding) are transformed along D and H as whole rows, then along W per tile.
+/// Fills `v` (`positions x C_in x cols` of the chunk, [`Plan::row_cols`] per row of tiles) with
+/// the chunk's input tiles transformed by `B^T`: per channel, the rows of voxels under the
+/// chunk's tiles (zeros in the padding) are split into phases and transformed along D and H as
+/// whole rows, then along W, every row of tiles at once.
 #[inline(always)]
 fn fill_transformed_inputs<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     v: &mut [T],
@@ -196,8 +197,8 @@ fn fill_transformed_inputs<T: Element, W: Minimal<M, N>, const M: usize, const N
 ) {
     let [ad, ah, aw] = plan.axes;
     let in_vox: usize = g.input.iter().product();
-    let width = plan.input_width();
-    let (tiles, half) = (rows * aw.tiles, aw.tiles + 1);
+    let (half, cols) = (plan.row_cols(), rows * plan.row_cols());
+    let width = M * cols;
     for c in 0..g.c_in {
         let x_c = &x_n[c * in_vox..(c + 1) * in_vox];
         for r in 0..rows {
@@ -206,78 +207,80 @@ fn fill_transformed_inputs<T: Element, W: Minimal<M, N>, const M: usize, const N
                 let z = (td * ad.outs + a).wrapping_sub(ad.padding);
                 for b in 0..ah.ins {
                     let y = (th * ah.outs + b).wrapping_sub(ah.padding);
-                    let dst = &mut bufs.a[(a * ah.ins + b) * width..][..width];
+                    let dst = &mut bufs.a[(a * ah.ins + b) * width + r * half..];
                     // Wrapped (negative) indices are huge, so one comparison covers both sides.
                     if z < ad.input && y < ah.input {
                         let src = &x_c[(z * ah.input + y) * aw.input..][..aw.input];
-                        deinterleave::<T, M>(dst, half, src, aw.padding);
+                        deinterleave::<T, M>(dst, (cols, half), src, aw.padding);
                     } else {
-                        dst.fill(T::ZERO);
+                        (0..M).for_each(|p| dst[p * cols..][..half].fill(T::ZERO));
                     }
                 }
             }
-            let (nd, nh) =
-                map_d_then_h(bufs, (ad.ins, ah.ins), (ad.taps, ah.taps), width, W::input);
-            let j0 = r * aw.tiles;
-            for row in 0..nd * nh {
-                let phases = &bufs.a[row * width..(row + 1) * width];
-                // Input i of tile t is the padded row's voxel M t + i: phase i % M, index t + i / M.
-                let srcs = std::array::from_fn(|i| &phases[(i % M) * half + i / M..]);
-                let at = std::array::from_fn(|xi| ((row * N + xi) * g.c_in + c) * tiles + j0);
-                map_into(srcs, v, at, aw.tiles, W::input);
-            }
+        }
+        let (nd, nh) = map_d_then_h(bufs, (ad.ins, ah.ins), (ad.taps, ah.taps), width, W::input);
+        // Read past the last row by F(2, 3)'s unused column: a stale value there could be a
+        // non-finite one, which the weight gradient's zero output gradients would not cancel.
+        bufs.a[nd * nh * width] = T::ZERO;
+        for row in 0..nd * nh {
+            let phases = &bufs.a[row * width..];
+            // Input i of tile t is the padded row's voxel M t + i: phase i % M, index t + i / M.
+            let srcs = std::array::from_fn(|i| &phases[(i % M) * cols + i / M..]);
+            let at = std::array::from_fn(|xi| ((row * N + xi) * g.c_in + c) * cols);
+            map_into(srcs, v, at, cols, W::input);
         }
     }
 }
 
-/// The outputs of one row of tiles of channel `c`: `A^T` along W per tile from the products
-/// `m` (`positions x C_out x tiles`), then along H and D over whole rows. The result, in
-/// `bufs.a`, is `outs_d x outs_h` rows of `output_width` values, in phases.
+/// The outputs of channel `c` of a chunk of `cols` columns: `A^T` along W from the products
+/// `m` (`positions x C_out x cols`), then along H and D over whole rows. The result, in
+/// `bufs.a`, is `outs_d x outs_h` rows of `M` phases of `cols` values.
 #[inline(always)]
-fn transform_output_row<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+fn transform_outputs<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     bufs: &mut RowBuffers<T>,
     m: &[T],
     (c, c_out): (usize, usize),
     plan: &Plan,
-    (j0, tiles): (usize, usize),
+    cols: usize,
 ) {
-    let [ad, ah, aw] = plan.axes;
-    let width = plan.output_width();
+    let [ad, ah, _] = plan.axes;
+    let width = M * cols;
     for row in 0..ad.ins * ah.ins {
-        let srcs = std::array::from_fn(|xi| &m[((row * N + xi) * c_out + c) * tiles + j0..]);
-        let at = std::array::from_fn(|p| row * width + p * aw.tiles);
-        map_into(srcs, &mut bufs.a, at, aw.tiles, W::output);
+        let srcs = std::array::from_fn(|xi| &m[((row * N + xi) * c_out + c) * cols..]);
+        let at = std::array::from_fn(|p| row * width + p * cols);
+        map_into(srcs, &mut bufs.a, at, cols, W::output);
     }
     map_d_then_h(bufs, (ad.ins, ah.ins), (ad.taps, ah.taps), width, W::output);
 }
 
-/// The output gradient of one row of tiles of channel `c` expanded by `A` into `z`
-/// (`positions x C_out x tiles`): rows of `grad_out` (zeros past the output, in phases)
-/// expanded along D and H, then along W per tile.
-#[allow(clippy::too_many_arguments)]
+/// The output gradient of channel `c` over a chunk's tiles expanded by `A` into `z`
+/// (`positions x C_out x cols`): rows of `grad_out` (zeros past the output and in the unused
+/// column, in phases) expanded along D and H, then along W.
 #[inline(always)]
-fn expand_output_grad_row<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+fn expand_output_grads<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     z: &mut [T],
     bufs: &mut RowBuffers<T>,
     go_c: &[T],
     (c, c_out): (usize, usize),
-    g: &Geometry,
-    plan: &Plan,
-    (row, j0, tiles): (usize, usize, usize),
+    (g, plan): (&Geometry, &Plan),
+    (row0, rows): (usize, usize),
 ) {
-    let [ad, ah, aw] = plan.axes;
+    let [ad, ah, _] = plan.axes;
     let out = g.output();
-    let width = plan.output_width();
-    let (td, th) = plan.row_tiles(row);
-    for a in 0..ad.outs {
-        for b in 0..ah.outs {
-            let (zz, yy) = (td * ad.outs + a, th * ah.outs + b);
-            let dst = &mut bufs.a[(a * ah.outs + b) * width..][..width];
-            if zz < out[0] && yy < out[1] {
-                let src = &go_c[(zz * out[1] + yy) * out[2]..][..out[2]];
-                deinterleave::<T, M>(dst, aw.tiles, src, 0);
-            } else {
-                dst.fill(T::ZERO);
+    let (half, cols) = (plan.row_cols(), rows * plan.row_cols());
+    let width = M * cols;
+    for r in 0..rows {
+        let (td, th) = plan.row_tiles(row0 + r);
+        for a in 0..ad.outs {
+            for b in 0..ah.outs {
+                let (zz, yy) = (td * ad.outs + a, th * ah.outs + b);
+                let dst = &mut bufs.a[(a * ah.outs + b) * width + r * half..];
+                if zz < out[0] && yy < out[1] {
+                    let src = &go_c[(zz * out[1] + yy) * out[2]..][..out[2]];
+                    deinterleave::<T, M>(dst, (cols, half), src, 0);
+                } else {
+                    (0..M).for_each(|p| dst[p * cols..][..half].fill(T::ZERO));
+                }
             }
         }
     }
@@ -288,10 +291,10 @@ fn expand_output_grad_row<T: Element, W: Minimal<M, N>, const M: usize, const N:
         width,
         W::output_adjoint,
     );
-    for r in 0..nd * nh {
-        let srcs = std::array::from_fn(|p| &bufs.a[r * width + p * aw.tiles..]);
-        let at = std::array::from_fn(|xi| ((r * N + xi) * c_out + c) * tiles + j0);
-        map_into(srcs, z, at, aw.tiles, W::output_adjoint);
+    for row in 0..nd * nh {
+        let srcs = std::array::from_fn(|p| &bufs.a[row * width + p * cols..]);
+        let at = std::array::from_fn(|xi| ((row * N + xi) * c_out + c) * cols);
+        map_into(srcs, z, at, cols, W::output_adjoint);
     }
 }
 
@@ -369,7 +372,7 @@ impl<T> Default for ForwardScratch<T> {
 
 /// A pooled [`ForwardScratch`] large enough for a pass of `plan`.
 fn scratch_for<T: Element>(plan: &Plan, c_in: usize, c_out: usize) -> Pooled<ForwardScratch<T>> {
-    let (p, most) = (plan.positions, plan.chunk_tiles());
+    let (p, most) = (plan.positions, plan.chunk_cols());
     let mut scratch = Pooled::<ForwardScratch<T>>::take();
     let rows = RowBuffers::<T>::len(plan);
     let ForwardScratch { v, m, bufs } = &mut *scratch;
@@ -390,44 +393,44 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
 ) {
     let (g, plan) = (pass.g, pass.plan);
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
-    let [ad, ah, aw] = plan.axes;
+    let [ad, ah, _] = plan.axes;
     let in_vox: usize = g.input.iter().product();
     let out = g.output();
     let out_vox: usize = out.iter().product();
     let ForwardScratch { v, m, bufs } = scratch;
-    let tiles = rows * aw.tiles;
+    let (half, cols) = (plan.row_cols(), rows * plan.row_cols());
     let x_n = &pass.x[n * ci * in_vox..];
     fill_transformed_inputs::<T, W, M, N>(v, bufs, x_n, g, plan, (row0, rows));
     for pos in 0..p {
-        // SAFETY: U[pos] is co x ci, V[pos] ci x tiles, M[pos] co x tiles, all in bounds.
+        // SAFETY: U[pos] is co x ci, V[pos] ci x cols, M[pos] co x cols, all in bounds.
         unsafe {
             matmul(
-                (co, tiles, ci),
-                (m[pos * co * tiles..].as_mut_ptr(), tiles as isize, 1),
+                (co, cols, ci),
+                (m[pos * co * cols..].as_mut_ptr(), cols as isize, 1),
                 (pass.u[pos * co * ci..].as_ptr(), ci as isize, 1),
-                (v[pos * ci * tiles..].as_ptr(), tiles as isize, 1),
+                (v[pos * ci * cols..].as_ptr(), cols as isize, 1),
                 false,
             )
         };
     }
-    let width = plan.output_width();
-    for r in 0..rows {
-        let (td, th) = plan.row_tiles(row0 + r);
-        for c in 0..co {
-            transform_output_row::<T, W, M, N>(bufs, m, (c, co), plan, (r * aw.tiles, tiles));
+    let width = M * cols;
+    for c in 0..co {
+        transform_outputs::<T, W, M, N>(bufs, m, (c, co), plan, cols);
+        for r in 0..rows {
+            let (td, th) = plan.row_tiles(row0 + r);
             for a in 0..ad.outs {
                 for b in 0..ah.outs {
                     let (z, yy) = (td * ad.outs + a, th * ah.outs + b);
                     if z >= ad.output || yy >= ah.output {
                         continue;
                     }
-                    let phases = &bufs.a[(a * ah.outs + b) * width..][..width];
+                    let phases = &bufs.a[(a * ah.outs + b) * width + r * half..];
                     let at = (n * co + c) * out_vox + (z * out[1] + yy) * out[2];
                     // SAFETY: in bounds of `y`; this output row belongs to this chunk's tiles
                     // only, and no other reference to it exists.
                     let row =
                         unsafe { std::slice::from_raw_parts_mut(pass.y.ptr().add(at), out[2]) };
-                    interleave::<T, M>(row, phases, aw.tiles);
+                    interleave::<T, M>(row, phases, cols);
                 }
             }
         }
@@ -526,26 +529,23 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
     let in_vox: usize = g.input.iter().product();
     let out_vox: usize = g.output().iter().product();
-    let aw = plan.axes[2];
     let ForwardScratch { v, m: z, bufs } = scratch;
-    let tiles = rows * aw.tiles;
+    let cols = rows * plan.row_cols();
     let x_n = &pass.x[n * ci * in_vox..];
     fill_transformed_inputs::<T, W, M, N>(v, bufs, x_n, g, plan, (row0, rows));
     for c in 0..co {
         let go_c = &pass.grad_out[(n * co + c) * out_vox..][..out_vox];
-        for r in 0..rows {
-            let at = (row0 + r, r * aw.tiles, tiles);
-            expand_output_grad_row::<T, W, M, N>(z, bufs, go_c, (c, co), g, plan, at);
-        }
+        expand_output_grads::<T, W, M, N>(z, bufs, go_c, (c, co), (g, plan), (row0, rows));
     }
     for pos in 0..p {
-        // SAFETY: dU[pos] is co x ci, Z[pos] co x tiles, V[pos]^T tiles x ci.
+        // SAFETY: dU[pos] is co x ci, Z[pos] co x cols, V[pos]^T cols x ci. The unused columns
+        // of Z are zeros, so those of V add nothing.
         unsafe {
             matmul(
-                (co, ci, tiles),
+                (co, ci, cols),
                 (du[pos * co * ci..].as_mut_ptr(), ci as isize, 1),
-                (z[pos * co * tiles..].as_ptr(), tiles as isize, 1),
-                (v[pos * ci * tiles..].as_ptr(), 1, tiles as isize),
+                (z[pos * co * cols..].as_ptr(), cols as isize, 1),
+                (v[pos * ci * cols..].as_ptr(), 1, cols as isize),
                 true,
             )
         };

@@ -125,30 +125,36 @@ pub(super) fn map_d_then_h<T: Element, const I: usize, const O: usize>(
 /// a loop with `j % M` and `j / M` per voxel was a fifth of the forward pass's time.
 const SHUFFLE_TILES: usize = 8;
 
-/// Splits the row `zeros(padding) ++ src ++ zeros` into `M` phases of `half` values in `dst`:
-/// `dst[p half + k]` is the padded row's voxel `M k + p` (zero past either end).
+/// Splits the row `zeros(padding) ++ src ++ zeros` into `M` phases of `count` values, phase `p`
+/// at `dst[p stride..]`: `dst[p stride + k]` is the padded row's voxel `M k + p` (zero past
+/// either end).
 #[inline(always)]
 pub(super) fn deinterleave<T: Element, const M: usize>(
     dst: &mut [T],
-    half: usize,
+    (stride, count): (usize, usize),
     src: &[T],
     padding: usize,
 ) {
     let end = padding + src.len();
     let first_full = padding.div_ceil(M);
     let inside =
-        |k: usize, tiles: usize| k >= first_full && M * (k + tiles) <= end && k + tiles <= half;
+        |k: usize, tiles: usize| k >= first_full && M * (k + tiles) <= end && k + tiles <= count;
     let mut k = 0;
-    while k < half {
+    while k < count {
         k += if inside(k, SHUFFLE_TILES) {
-            deinterleave_block::<T, M, SHUFFLE_TILES>(dst, half, &src[M * k - padding..], k)
+            deinterleave_block::<T, M, SHUFFLE_TILES>(dst, stride, &src[M * k - padding..], k)
         } else if inside(k, SHUFFLE_TILES / 2) {
-            deinterleave_block::<T, M, { SHUFFLE_TILES / 2 }>(dst, half, &src[M * k - padding..], k)
+            deinterleave_block::<T, M, { SHUFFLE_TILES / 2 }>(
+                dst,
+                stride,
+                &src[M * k - padding..],
+                k,
+            )
         } else {
             for p in 0..M {
                 // Before the row, `j - padding` wraps to a huge index: `get` gives zero.
                 let j = (M * k + p).wrapping_sub(padding);
-                dst[p * half + k] = src.get(j).copied().unwrap_or(T::ZERO);
+                dst[p * stride + k] = src.get(j).copied().unwrap_or(T::ZERO);
             }
             1
         };
@@ -160,31 +166,31 @@ pub(super) fn deinterleave<T: Element, const M: usize>(
 #[inline(always)]
 fn deinterleave_block<T: Element, const M: usize, const B: usize>(
     dst: &mut [T],
-    half: usize,
+    stride: usize,
     src: &[T],
     k: usize,
 ) -> usize {
     let block = &src[..M * B];
     for p in 0..M {
         let phase: [T; B] = std::array::from_fn(|t| block[M * t + p]);
-        dst[p * half + k..][..B].copy_from_slice(&phase);
+        dst[p * stride + k..][..B].copy_from_slice(&phase);
     }
     B
 }
 
-/// The inverse of [`deinterleave`] without padding: `dst[x]` is `phases[(x % M) tiles + x / M]`.
+/// The inverse of [`deinterleave`] without padding: `dst[x]` is `phases[(x % M) stride + x / M]`.
 #[inline(always)]
-pub(super) fn interleave<T: Element, const M: usize>(dst: &mut [T], phases: &[T], tiles: usize) {
+pub(super) fn interleave<T: Element, const M: usize>(dst: &mut [T], phases: &[T], stride: usize) {
     let mut t = 0;
     while M * t < dst.len() {
         let left = dst.len() - M * t;
         t += if left >= M * SHUFFLE_TILES {
-            interleave_block::<T, M, SHUFFLE_TILES>(&mut dst[M * t..], phases, tiles, t)
+            interleave_block::<T, M, SHUFFLE_TILES>(&mut dst[M * t..], phases, stride, t)
         } else if left >= M * SHUFFLE_TILES / 2 {
-            interleave_block::<T, M, { SHUFFLE_TILES / 2 }>(&mut dst[M * t..], phases, tiles, t)
+            interleave_block::<T, M, { SHUFFLE_TILES / 2 }>(&mut dst[M * t..], phases, stride, t)
         } else {
             for (p, out) in dst[M * t..].iter_mut().take(M).enumerate() {
-                *out = phases[p * tiles + t];
+                *out = phases[p * stride + t];
             }
             1
         };
@@ -196,11 +202,11 @@ pub(super) fn interleave<T: Element, const M: usize>(dst: &mut [T], phases: &[T]
 fn interleave_block<T: Element, const M: usize, const B: usize>(
     dst: &mut [T],
     phases: &[T],
-    tiles: usize,
+    stride: usize,
     t: usize,
 ) -> usize {
     let rows: [[T; B]; M] = std::array::from_fn(|p| {
-        let row = &phases[p * tiles + t..][..B];
+        let row = &phases[p * stride + t..][..B];
         std::array::from_fn(|i| row[i])
     });
     for (i, out) in dst[..M * B].iter_mut().enumerate() {
