@@ -623,8 +623,8 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
             du
         })
         .collect();
-    // The partials' sum, in f64, in a fixed order per value; threaded (on one thread it was a
-    // tenth of a 28^3 weight gradient).
+    // The partials' sum, in f64, in a fixed order per value (the same bits on any number of
+    // threads), shared between the threads.
     let mut du = vec![0f64; p * co * ci];
     du.par_chunks_mut(REDUCE_CHUNK)
         .enumerate()
