@@ -726,65 +726,50 @@ mod tests {
         ]
     }
 
+    /// Asserts that the three passes with `tile` equal the im2col kernel's to 1e-13 relative on
+    /// values drawn from `seed`.
+    fn assert_passes_match_im2col(g: &Geometry, tile: Tile, seed: u64) {
+        let in_len = g.batch * g.c_in * g.input.iter().product::<usize>();
+        let out_len = g.batch * g.c_out * g.output().iter().product::<usize>();
+        let w_len = g.c_out * g.c_in * g.kernel.iter().product::<usize>();
+        let x = values(in_len, 3 * seed);
+        let w = values(w_len, 3 * seed + 1);
+        let go = values(out_len, 3 * seed + 2);
+        let references = [
+            cpu::forward(&x, &w, g),
+            cpu::grad_input(&go, &w, g),
+            cpu::grad_weight(&x, &go, g),
+        ];
+        let ours = passes(&x, &w, &go, g, tile);
+        for (pass, (ours, reference)) in ours.iter().zip(&references).enumerate() {
+            let err = max_rel_diff(ours, reference);
+            assert!(
+                err < 1e-13,
+                "{tile:?} {g:?} pass {pass}: relative error {err}"
+            );
+        }
+    }
+
     #[test]
     fn all_three_passes_match_the_im2col_kernel_in_f64() {
         for tile in [Tile::F2, Tile::F4] {
             for (i, g) in geometries().into_iter().enumerate() {
                 assert!(supports(&g), "{g:?}");
-                let in_len = g.batch * g.c_in * g.input.iter().product::<usize>();
-                let out_len = g.batch * g.c_out * g.output().iter().product::<usize>();
-                let w_len = g.c_out * g.c_in * g.kernel.iter().product::<usize>();
-                let x = values(in_len, 3 * i as u64);
-                let w = values(w_len, 3 * i as u64 + 1);
-                let go = values(out_len, 3 * i as u64 + 2);
-                let references = [
-                    cpu::forward(&x, &w, &g),
-                    cpu::grad_input(&go, &w, &g),
-                    cpu::grad_weight(&x, &go, &g),
-                ];
-                let ours = passes(&x, &w, &go, &g, tile);
-                for (pass, (ours, reference)) in ours.iter().zip(&references).enumerate() {
-                    let err = max_rel_diff(ours, reference);
-                    assert!(
-                        err < 1e-13,
-                        "{tile:?} {g:?} pass {pass}: relative error {err}"
-                    );
-                }
+                assert_passes_match_im2col(&g, tile, i as u64);
             }
         }
     }
 
     #[test]
     fn passes_split_into_several_chunks_match_im2col() {
+        // 256 rows of tiles per batch item: more than one chunk at 3 -> 5 channels.
         let g = Geometry {
-            batch: 2,
-            c_in: 3,
-            c_out: 5,
             input: [62, 61, 9],
-            kernel: [3, 3, 3],
-            padding: [1, 1, 1],
-            stride: 1,
+            ..geometries()[0]
         };
         let plan = Plan::new(&g, 4);
         assert!(plan.chunks(1).len() >= 2, "one chunk: {plan:?}");
-        let in_len = g.batch * g.c_in * g.input.iter().product::<usize>();
-        let out_len = g.batch * g.c_out * g.output().iter().product::<usize>();
-        let x = values(in_len, 41);
-        let w = values(g.c_out * g.c_in * 27, 42);
-        let go = values(out_len, 43);
-        let references = [
-            cpu::forward(&x, &w, &g),
-            cpu::grad_input(&go, &w, &g),
-            cpu::grad_weight(&x, &go, &g),
-        ];
-        for (pass, (ours, reference)) in passes(&x, &w, &go, &g, Tile::F4)
-            .iter()
-            .zip(&references)
-            .enumerate()
-        {
-            let err = max_rel_diff(ours, reference);
-            assert!(err < 1e-13, "pass {pass}: relative error {err}");
-        }
+        assert_passes_match_im2col(&g, Tile::F4, 14);
     }
 
     #[test]
