@@ -7,7 +7,8 @@
 //! products per channel pair instead of 216 (3.4x fewer); with F(4, 3), 6x6x6 inputs give 4x4x4
 //! outputs with 216 products instead of 1728 (8x fewer), and 3.4 transformed values per output
 //! instead of 8. The products are, for each transformed position, one matrix product
-//! `C_out x C_in` by `C_in x tiles`, which `gemm` runs at full speed. All three passes of a
+//! `C_out x C_in` by `C_in x tiles` (plus one unused column per row of tiles, see
+//! `Plan::row_cols`), which `gemm` runs at full speed. All three passes of a
 //! convolution use it:
 //!
 //! - forward: input tiles transformed by `B^T`, weights by `G`, products by `A^T`;
@@ -19,8 +20,8 @@
 //!
 //! F(2, 3) uses the points 0, 1, -1 (entries 0, ±1, ±1/2) and rounds about as well as the direct
 //! sum; F(4, 3) adds ±2 (entries up to 8 and 1/24) and rounds worse, by the factor its tests
-//! state. Work is split into chunks of tiles of one batch item whose transformed inputs and
-//! products stay near the L2 cache.
+//! state. Work is split into chunks of rows of tiles of one batch item, each a few times the L2
+//! cache in transformed inputs and products (streamed through once; see `CHUNK_TARGET_ELEMS`).
 //!
 //! The 1D transforms and the weights' transform are in `minimal`, the row-wise maps and the
 //! split of rows into phases in `rows`; this module tiles a convolution and runs its passes.

@@ -1,5 +1,6 @@
 //! Row-wise work of the Winograd kernel: element-wise maps over rows in fixed-size blocks (the
-//! transforms along D and H, and along W per tile), and the split of rows into phases and back.
+//! transforms along D and H over whole rows, and along W over a chunk's tiles), and the split of
+//! rows into phases and back.
 
 use super::RowBuffers;
 use crate::element::Element;
@@ -18,7 +19,7 @@ pub(super) fn map_into<T: Element, const I: usize, const O: usize>(
     len: usize,
     map: impl Fn([T; I]) -> [T; O],
 ) {
-    // Rows shorter than a block (7 tiles of F(4, 3) at 28^3) take half blocks, so that every
+    // Rows shorter than a block take half blocks (and the shortest single values), so that every
     // copy has a fixed size: a copy of a run-time length is a call to `memmove`.
     if len >= LANES {
         map_blocks::<T, I, O, LANES>(srcs, dst, dst_at, len, map)
