@@ -332,14 +332,15 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
         }
     }
 
-    /// The input gradient of [`Self::conv`] for an input of `input_dims`.
+    /// The input gradient of [`Self::conv`] for an input of `input_dims` as [`Self::lift`] leaves
+    /// it on the CPU (the only device the penalty's own graph runs on).
     fn conv_grad_input(grad_out: &Tensor, weight: &Tensor, input_dims: &[usize]) -> Result<Tensor> {
-        let cfg = ConvConfig::default();
-        if input_dims.len() == 4 {
-            op::conv2d_grad_input(grad_out, weight, cfg, input_dims)
-        } else {
-            op::conv3d_grad_input(grad_out, &Self::kernel_3d(weight)?, cfg, input_dims)
-        }
+        op::conv3d_grad_input(
+            grad_out,
+            &Self::kernel_3d(weight)?,
+            ConvConfig::default(),
+            input_dims,
+        )
     }
 
     /// Errors unless `xs` has `AXES` spatial axes, each at least the receptive field.

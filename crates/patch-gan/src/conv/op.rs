@@ -93,39 +93,11 @@ pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     Ok(apply(&xs, &kernel, ConvOp(Domain::Grid(spec)))?.reshape((n, c_out, h_out, w_out))?)
 }
 
-/// The input gradient of [`conv2d`] on the CPU: `d/dx sum(grad_out * conv2d(x, kernel))` for an
-/// `x` of `input_dims` `(N, C_in, H, W)` (PyTorch's `conv_transpose2d` of `grad_out`). It is
+/// The input gradient of [`conv3d`] on the CPU: `d/dx sum(grad_out * conv3d(x, kernel))` for an
+/// `x` of `input_dims` `(N, C_in, D, H, W)` (PyTorch's `conv_transpose3d` of `grad_out`). It is
 /// linear in both arguments and differentiable in both, so a critic's input gradient written
-/// with it is an ordinary first-order graph in the critic's weights.
-pub(crate) fn conv2d_grad_input(
-    grad_out: &Tensor,
-    kernel: &Tensor,
-    cfg: ConvConfig,
-    input_dims: &[usize],
-) -> Result<Tensor> {
-    let &[n, c_in, h, w] = input_dims else {
-        return Err(invalid(
-            "input",
-            format!("expected (N, C, H, W), got {input_dims:?}"),
-        ));
-    };
-    let (n_out, c_out, h_out, w_out) = grad_out.dims4()?;
-    let (kc_out, kc_in, kh, kw) = kernel.dims4()?;
-    let spec = Spec {
-        padding: [0, cfg.padding, cfg.padding],
-        stride: cfg.stride,
-    };
-    let grad = grid_grad_input(
-        &grad_out.reshape((n_out, c_out, 1, h_out, w_out))?,
-        &kernel.reshape((kc_out, kc_in, 1, kh, kw))?,
-        spec,
-        Shape::from((n, c_in, 1, h, w)),
-    )?;
-    Ok(grad.reshape(input_dims)?)
-}
-
-/// The input gradient of [`conv3d`] on the CPU, as [`conv2d_grad_input`] for an `x` of
-/// `input_dims` `(N, C_in, D, H, W)` (PyTorch's `conv_transpose3d` of `grad_out`).
+/// with it is an ordinary first-order graph in the critic's weights (a 2D critic's images take
+/// a depth axis of 1).
 pub(crate) fn conv3d_grad_input(
     grad_out: &Tensor,
     kernel: &Tensor,
