@@ -54,6 +54,7 @@ mod fused;
 mod generator;
 mod init;
 mod norm;
+mod output;
 mod simd;
 mod storage;
 mod upsampler;

@@ -16,6 +16,7 @@ use rayon::prelude::*;
 
 use super::{channels_and_plane, lane_sum, lane_sums, slope_at};
 use crate::element::Element;
+use crate::output::{extend_par_chunks, unwritten};
 use crate::storage::{self, Kernel};
 
 /// Which statistics normalise the input.
@@ -147,17 +148,17 @@ impl Kernel for ForwardKernel<'_> {
             batch,
         };
         let slope = T::from_f64(self.op.slope);
-        let mut out = vec![T::ZERO; x.len()];
-        out.par_chunks_mut(plane)
-            .zip(x.par_chunks(plane))
-            .enumerate()
-            .for_each(|(i, (dst, src))| {
+        let mut out = unwritten(x.len());
+        // SAFETY: every chunk of `out` is written from the chunk of `x` of the same length.
+        unsafe {
+            extend_par_chunks(&mut out, x.len(), plane, |i, dst| {
                 let (scale, shift) = affine::<T>(&saved, i % channels);
-                for (d, &v) in dst.iter_mut().zip(src) {
+                for (d, &v) in dst.iter_mut().zip(&x[i * plane..]) {
                     let pre = v * scale + shift;
-                    *d = pre * slope_at(pre, slope);
+                    d.write(pre * slope_at(pre, slope));
                 }
-            });
+            })
+        };
         *lock(&self.op.saved)? = Some(saved);
         Ok(out)
     }
@@ -295,12 +296,12 @@ impl Kernel for BatchNormActGrad {
         let sums = self.sums(x, grad, channels, plane);
         let count = (x.len() / channels) as f64;
         let slope = T::from_f64(self.slope);
-        let mut out = vec![T::ZERO; x.len() + 2 * channels];
-        let (dx, params) = out.split_at_mut(x.len());
-        dx.par_chunks_mut(plane)
-            .zip(x.par_chunks(plane).zip(grad.par_chunks(plane)))
-            .enumerate()
-            .for_each(|(i, (dst, (xs, gs)))| {
+        let mut out = unwritten(x.len() + 2 * channels);
+        // SAFETY: every chunk of `out` is written from the chunks of `x` and `grad` of the same
+        // length.
+        unsafe {
+            extend_par_chunks(&mut out, x.len(), plane, |i, dst| {
+                let (xs, gs) = (&x[i * plane..], &grad[i * plane..]);
                 let c = i % channels;
                 let (scale, shift) = affine::<T>(&self.saved, c);
                 let (mean, inv) = (self.saved.mean[c], self.saved.inv_std[c]);
@@ -312,13 +313,12 @@ impl Kernel for BatchNormActGrad {
                 let (k, mean) = (T::from_f64(k), T::from_f64(mean));
                 for ((d, &v), &g) in dst.iter_mut().zip(xs).zip(gs) {
                     let g = g * slope_at(v * scale + shift, slope);
-                    *d = k * g + along_x * (v - mean) + offset;
+                    d.write(k * g + along_x * (v - mean) + offset);
                 }
-            });
-        for (c, &(sum_g, sum_gx)) in sums.iter().enumerate() {
-            params[c] = T::from_f64(sum_gx);
-            params[channels + c] = T::from_f64(sum_g);
-        }
+            })
+        };
+        out.extend(sums.iter().map(|&(_, sum_gx)| T::from_f64(sum_gx)));
+        out.extend(sums.iter().map(|&(sum_g, _)| T::from_f64(sum_g)));
         Ok(out)
     }
 }

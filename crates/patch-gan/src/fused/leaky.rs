@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use super::channel_sum::channel_sum;
 use super::{channels_and_plane, slope_at, CHUNK};
 use crate::element::Element;
+use crate::output::{extend_par_chunks, unwritten};
 use crate::storage::{self, Kernel};
 
 /// `LeakyReLU(x) = x` for `x > 0`, else `negative_slope x`, element-wise; differentiable to any
@@ -187,17 +188,17 @@ struct BiasLeakyKernel {
 impl Kernel for BiasLeakyKernel {
     fn run<T: Element>(&self, x: &[T], bias: &[T]) -> candle_core::Result<Vec<T>> {
         let slope = T::from_f64(self.slope);
-        let mut out = vec![T::ZERO; x.len()];
-        out.par_chunks_mut(self.plane)
-            .zip(x.par_chunks(self.plane))
-            .enumerate()
-            .for_each(|(i, (dst, src))| {
+        let mut out = unwritten(x.len());
+        // SAFETY: every chunk of `out` is written from the chunk of `x` of the same length.
+        unsafe {
+            extend_par_chunks(&mut out, x.len(), self.plane, |i, dst| {
                 let b = bias[i % self.channels];
-                for (d, &v) in dst.iter_mut().zip(src) {
+                for (d, &v) in dst.iter_mut().zip(&x[i * self.plane..]) {
                     let v = v + b;
-                    *d = v * slope_at(v, slope);
+                    d.write(v * slope_at(v, slope));
                 }
-            });
+            })
+        };
         Ok(out)
     }
 }

@@ -32,12 +32,13 @@ use rayon::prelude::*;
 use super::cpu::{Geometry, SharedMut};
 use super::scratch::{at_least, Pooled};
 use crate::element::Element;
+use crate::output::unwritten;
 use crate::simd::has_avx2;
 
 mod minimal;
 mod rows;
 
-use minimal::{along_tap_axes, transform_weights, Minimal, F2, F4};
+use minimal::{map_pair_blocks, transform_weights, Minimal, F2, F4};
 use rows::{deinterleave, interleave, map_d_then_h, map_into};
 
 /// Elements of the transformed inputs plus products a chunk aims for (f32: 4 MiB, four times a
@@ -49,9 +50,6 @@ const CHUNK_TARGET_ELEMS: usize = 1 << 20;
 /// Partial sums of the weight gradient, as in the im2col kernel: a fixed split of the chunks, so
 /// the bits do not depend on thread scheduling.
 const WEIGHT_GRAD_BLOCKS: usize = 8;
-
-/// Values of the weight gradient's partial sums a task adds up.
-const REDUCE_CHUNK: usize = 1 << 14;
 
 /// Whether the geometry has the shape F(m, 3) handles: stride 1, 3 taps along W and 1 or 3
 /// along D and H, and padding at most `k - 1` (so the input gradient is a convolution too).
@@ -479,7 +477,7 @@ fn forward_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     let plan = Plan::new(g, M);
     let u = transform_weights::<T, W, M, N>(w, g);
     let out_vox: usize = g.output().iter().product();
-    let mut y = vec![T::ZERO; g.batch * g.c_out * out_vox];
+    let mut y = unwritten::<T>(g.batch * g.c_out * out_vox);
     let pass = ForwardPass {
         x,
         u: &u,
@@ -501,6 +499,9 @@ fn forward_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
             forward_chunk::<T, W, M, N>(&pass, scratch, chunk)
         },
     );
+    // SAFETY: the chunks cover every row of tiles of every batch item, and a chunk writes every
+    // output row under its tiles.
+    unsafe { y.set_len(g.batch * g.c_out * out_vox) };
     y
 }
 
@@ -528,8 +529,9 @@ struct WeightGradPass<'a, T> {
 fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     pass: &WeightGradPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
-    du: &mut [T],
+    du: &mut Vec<T>,
     (n, row0, rows): (usize, usize, usize),
+    first: bool,
 ) {
     let (g, plan) = (pass.g, pass.plan);
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
@@ -543,16 +545,19 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
         let go_c = &pass.grad_out[(n * co + c) * out_vox..][..out_vox];
         expand_output_grads::<T, W, M, N>(z, bufs, go_c, (c, co), (g, plan), (row0, rows));
     }
+    // The capacity, not the length: `du` is unwritten until the first chunk's products.
+    let du = du.spare_capacity_mut().as_mut_ptr().cast::<T>();
     for pos in 0..p {
-        // SAFETY: dU[pos] is co x ci, Z[pos] co x cols, V[pos]^T cols x ci. The unused columns
-        // of Z are zeros, so those of V add nothing.
+        // SAFETY: dU[pos] is co x ci, Z[pos] co x cols, V[pos]^T cols x ci, all in bounds (`du`
+        // has room for p x co x ci). The unused columns of Z are zeros, so those of V add
+        // nothing. Without `first` the products are added to values an earlier chunk wrote.
         unsafe {
             matmul(
                 (co, ci, cols),
-                (du[pos * co * ci..].as_mut_ptr(), ci as isize, 1),
+                (du.add(pos * co * ci), ci as isize, 1),
                 (z[pos * co * cols..].as_ptr(), cols as isize, 1),
                 (v[pos * ci * cols..].as_ptr(), 1, cols as isize),
-                true,
+                !first,
             )
         };
     }
@@ -567,10 +572,11 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
 unsafe fn weight_grad_chunk_avx2<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     pass: &WeightGradPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
-    du: &mut [T],
+    du: &mut Vec<T>,
     chunk: (usize, usize, usize),
+    first: bool,
 ) {
-    weight_grad_chunk::<T, W, M, N>(pass, scratch, du, chunk)
+    weight_grad_chunk::<T, W, M, N>(pass, scratch, du, chunk, first)
 }
 
 /// Gradient of `sum(grad_out * conv3d(x, w))` with respect to `w`, as
@@ -608,51 +614,71 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
     let partials: Vec<Vec<T>> = chunks
         .par_chunks(per_block)
         .map(|block| {
-            let mut du = vec![T::ZERO; p * co * ci];
+            let mut du = unwritten::<T>(p * co * ci);
             let mut scratch = scratch_for(&plan, ci, co);
-            for &chunk in block {
+            for (i, &chunk) in block.iter().enumerate() {
+                // The block's first chunk writes `du`, the others add to it.
+                let first = i == 0;
                 #[cfg(target_arch = "x86_64")]
                 if avx2 {
                     // SAFETY: the CPU has AVX2 (checked above).
                     unsafe {
-                        weight_grad_chunk_avx2::<T, W, M, N>(&pass, &mut scratch, &mut du, chunk)
+                        weight_grad_chunk_avx2::<T, W, M, N>(
+                            &pass,
+                            &mut scratch,
+                            &mut du,
+                            chunk,
+                            first,
+                        )
                     };
                     continue;
                 }
-                weight_grad_chunk::<T, W, M, N>(&pass, &mut scratch, &mut du, chunk);
+                weight_grad_chunk::<T, W, M, N>(&pass, &mut scratch, &mut du, chunk, first);
             }
+            // SAFETY: the first chunk's products wrote every value of every position.
+            unsafe { du.set_len(p * co * ci) };
             du
         })
         .collect();
-    // The partials' sum, in f64, in a fixed order per value (the same bits on any number of
-    // threads), shared between the threads.
-    let mut du = vec![0f64; p * co * ci];
-    du.par_chunks_mut(REDUCE_CHUNK)
-        .enumerate()
-        .for_each(|(i, sums)| {
-            for partial in &partials {
-                let partial = &partial[i * REDUCE_CHUNK..];
-                sums.iter_mut()
-                    .zip(partial)
-                    .for_each(|(a, b)| *a += b.to_f64());
-            }
-        });
     let taps: usize = g.kernel.iter().product();
-    let mut dw = vec![T::ZERO; co * ci * taps];
-    let (pairs, mut tmp) = (co * ci, Vec::new());
-    let shape = plan.axes.map(|a| a.ins);
-    let by_tap = along_tap_axes(
-        &mut du,
-        &mut tmp,
-        (shape, pairs),
-        g.kernel,
+    let pairs = co * ci;
+    let mut dw = unwritten::<T>(pairs * taps);
+    let dst = SharedMut(dw.as_mut_ptr());
+    map_pair_blocks(
+        pairs,
+        (plan.axes.map(|a| a.ins), g.kernel),
         W::weight_adjoint,
+        |range, sums| {
+            // The partials' sum, in f64, in a fixed order per value: the same bits on any
+            // number of threads.
+            let width = range.len();
+            sums.fill(0.0);
+            for partial in &partials {
+                for (pos, row) in sums.chunks_exact_mut(width).enumerate() {
+                    let values = &partial[pos * pairs + range.start..][..width];
+                    row.iter_mut()
+                        .zip(values)
+                        .for_each(|(a, b)| *a += b.to_f64());
+                }
+            }
+        },
+        |range, by_tap| {
+            let width = range.len();
+            for (t, values) in by_tap.chunks_exact(width).enumerate() {
+                for (j, v) in values.iter().enumerate() {
+                    // SAFETY: `(range.start + j) * taps + t` < pairs * taps; the blocks' pair
+                    // ranges are disjoint, so no two tasks write one value.
+                    unsafe {
+                        dst.ptr()
+                            .add((range.start + j) * taps + t)
+                            .write(T::from_f64(*v))
+                    };
+                }
+            }
+        },
     );
-    for (t, row) in by_tap.chunks_exact(pairs).enumerate() {
-        for (pair, v) in row.iter().enumerate() {
-            dw[pair * taps + t] = T::from_f64(*v);
-        }
-    }
+    // SAFETY: every block wrote every tap of its pairs, and the blocks cover all pairs.
+    unsafe { dw.set_len(pairs * taps) };
     dw
 }
 
@@ -771,6 +797,19 @@ mod tests {
         let plan = Plan::new(&g, 4);
         assert!(plan.chunks(1).len() >= 2, "one chunk: {plan:?}");
         assert_passes_match_im2col(&g, Tile::F4, 14);
+    }
+
+    #[test]
+    fn weight_gradient_blocks_of_several_chunks_match_im2col() {
+        // One chunk per batch item, more chunks than partial sums: a block's first chunk
+        // writes its partial sum, the next adds to it.
+        let g = Geometry {
+            batch: WEIGHT_GRAD_BLOCKS + 1,
+            ..geometries()[0]
+        };
+        let plan = Plan::new(&g, 2);
+        assert_eq!(plan.chunks(1).len(), 1, "{plan:?}");
+        assert_passes_match_im2col(&g, Tile::F2, 15);
     }
 
     #[test]
