@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use super::rows::map_rows;
 use crate::conv::cpu::{Geometry, SharedMut};
-use crate::conv::scratch::at_least;
+use crate::conv::scratch::{at_least, Pooled};
 use crate::element::Element;
 use crate::output::unwritten;
 
@@ -204,16 +204,24 @@ pub(super) fn map_pair_blocks<const I: usize, const O: usize>(
     let values: usize = shape.iter().product();
     (0..pairs.div_ceil(PAIR_BLOCK))
         .into_par_iter()
-        .for_each_init(
-            || (Vec::new(), Vec::new()),
-            |(buf, tmp), block| {
-                let range = block * PAIR_BLOCK..((block + 1) * PAIR_BLOCK).min(pairs);
-                let width = range.len();
-                at_least(buf, values * width);
-                read(range.clone(), &mut buf[..values * width]);
-                write(range, along_tap_axes(buf, tmp, (shape, width), kernel, map));
-            },
-        );
+        .for_each(|block| {
+            // From the thread's pool: fresh buffers per task were allocated and zeroed again
+            // for every call.
+            let mut scratch = Pooled::<PairScratch>::take();
+            let PairScratch { buf, tmp } = &mut *scratch;
+            let range = block * PAIR_BLOCK..((block + 1) * PAIR_BLOCK).min(pairs);
+            let width = range.len();
+            at_least(buf, values * width);
+            read(range.clone(), &mut buf[..values * width]);
+            write(range, along_tap_axes(buf, tmp, (shape, width), kernel, map));
+        });
+}
+
+/// The two buffers a task of [`map_pair_blocks`] transforms in, reused across calls.
+#[derive(Default)]
+struct PairScratch {
+    buf: Vec<f64>,
+    tmp: Vec<f64>,
 }
 
 /// The transformed weights `U[position][c_out][c_in]` of `w` `(C_out, C_in, kd, kh, kw)`.
