@@ -329,8 +329,8 @@ impl ModuleT for Generator3d {
         for (conv, bn) in &self.blocks {
             // The convolution's bias goes to the fused BatchNorm + LeakyReLU, which needs it in
             // eval mode only (batch statistics cancel it).
-            let convolved = op::conv3d(&h, conv.weight(), conv.config())?;
-            h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
+            let conv = (conv.weight(), conv.config(), conv.bias());
+            h = bn.forward_convolved(&h, conv, LEAKY_SLOPE, train)?;
         }
         self.tail.forward(&h)
     }

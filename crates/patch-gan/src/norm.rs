@@ -3,9 +3,10 @@
 use candle_core::{DType, ModuleT, Tensor, Var};
 use candle_nn::{Init, Module, VarBuilder};
 
+use crate::conv::{op, ConvConfig};
 use crate::error::{invalid, Result};
 pub use crate::fused::leaky_relu;
-use crate::fused::{batch_norm_act, NormStats};
+use crate::fused::{batch_norm_act, conv_batch_norm_act, BatchStats, NormStats};
 
 /// PyTorch's default `eps` for both normalisations.
 pub const NORM_EPS: f64 = 1e-5;
@@ -125,17 +126,48 @@ impl BatchNorm3d {
             NORM_EPS,
             negative_slope,
         )?;
-        if let Some(stats) = stats {
-            let shift = match input_bias {
-                Some(b) => to_f64(b)?,
-                None => vec![0.0; channels],
-            };
-            let mean: Vec<f64> = stats.mean.iter().zip(&shift).map(|(m, b)| m + b).collect();
-            let unbiased = stats.count as f64 / (stats.count.max(2) - 1) as f64;
-            let var: Vec<f64> = stats.var.iter().map(|v| v * unbiased).collect();
-            self.update_running(&mean, &var)?;
-        }
+        self.record(stats, input_bias)?;
         Ok(ys)
+    }
+
+    /// [`Self::forward_activated`] of `conv3d(xs, kernel, cfg)` (the convolution's bias is
+    /// `input_bias`). In train mode on the CPU the convolution and the normalisation are one
+    /// op (same kernels, same bits), whose backward pass skips candle's accumulation of the
+    /// convolution's output gradient.
+    pub(crate) fn forward_convolved(
+        &self,
+        xs: &Tensor,
+        (kernel, cfg, input_bias): (&Tensor, ConvConfig, Option<&Tensor>),
+        negative_slope: f64,
+        train: bool,
+    ) -> candle_core::Result<Tensor> {
+        if !train || !xs.device().is_cpu() {
+            let convolved = op::conv3d(xs, kernel, cfg)?;
+            return self.forward_activated(&convolved, input_bias, negative_slope, train);
+        }
+        let gamma_beta = Tensor::cat(&[&self.weight, &self.bias], 0)?;
+        let (ys, stats) =
+            conv_batch_norm_act(xs, kernel, cfg, &gamma_beta, (NORM_EPS, negative_slope))?;
+        self.record(stats, input_bias)?;
+        Ok(ys)
+    }
+
+    /// Folds a train-mode pass's batch statistics into the running ones; the batch's mean is
+    /// taken after `input_bias` (PyTorch's convolution would have added it).
+    fn record(
+        &self,
+        stats: Option<BatchStats>,
+        input_bias: Option<&Tensor>,
+    ) -> candle_core::Result<()> {
+        let Some(stats) = stats else { return Ok(()) };
+        let shift = match input_bias {
+            Some(b) => to_f64(b)?,
+            None => vec![0.0; stats.mean.len()],
+        };
+        let mean: Vec<f64> = stats.mean.iter().zip(&shift).map(|(m, b)| m + b).collect();
+        let unbiased = stats.count as f64 / (stats.count.max(2) - 1) as f64;
+        let var: Vec<f64> = stats.var.iter().map(|v| v * unbiased).collect();
+        self.update_running(&mean, &var)
     }
 
     /// `running = (1 - momentum) running + momentum batch` for both statistics.

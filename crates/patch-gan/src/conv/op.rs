@@ -414,8 +414,56 @@ fn wanted(
     }
 }
 
+/// The grid convolution of `cfg` on CPU storages, as the forward op runs it: for ops that fuse
+/// a convolution with what follows it.
+pub(crate) fn grid_conv_storage(
+    cfg: ConvConfig,
+    (s1, l1): (&CpuStorage, &Layout),
+    (s2, l2): (&CpuStorage, &Layout),
+) -> candle_core::Result<(CpuStorage, Shape)> {
+    ConvOp(Domain::Grid(Spec::uniform(cfg))).cpu_fwd(s1, l1, s2, l2)
+}
+
+/// The gradients of `sum(grad * conv3d(xs, kernel, cfg))` with respect to `xs` and `kernel`
+/// (each only if it is part of the autograd graph), as the forward op's backward pass makes
+/// them.
+pub(crate) fn grid_conv_grads(
+    xs: &Tensor,
+    kernel: &Tensor,
+    cfg: ConvConfig,
+    grad: &Tensor,
+) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+    ConvOp(Domain::Grid(Spec::uniform(cfg))).grads(&xs.contiguous()?, &kernel.contiguous()?, grad)
+}
+
 /// Forward op: `(x, kernel) -> y`.
 struct ConvOp(Domain);
+
+impl ConvOp {
+    /// The backward pass: the input gradient and the kernel gradient of `grad`, if wanted.
+    fn grads(
+        &self,
+        xs: &Tensor,
+        kernel: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let grad_xs = wanted(xs, || {
+            apply(
+                grad,
+                kernel,
+                GradInputOp(self.0.clone(), xs.shape().clone()),
+            )
+        })?;
+        let grad_kernel = wanted(kernel, || {
+            apply(
+                xs,
+                grad,
+                GradKernelOp(self.0.clone(), kernel.shape().clone()),
+            )
+        })?;
+        Ok((grad_xs, grad_kernel))
+    }
+}
 
 impl CustomOp2 for ConvOp {
     fn name(&self) -> &'static str {
@@ -442,21 +490,7 @@ impl CustomOp2 for ConvOp {
         _res: &Tensor,
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        let grad_xs = wanted(xs, || {
-            apply(
-                grad,
-                kernel,
-                GradInputOp(self.0.clone(), xs.shape().clone()),
-            )
-        })?;
-        let grad_kernel = wanted(kernel, || {
-            apply(
-                xs,
-                grad,
-                GradKernelOp(self.0.clone(), kernel.shape().clone()),
-            )
-        })?;
-        Ok((grad_xs, grad_kernel))
+        self.grads(xs, kernel, grad)
     }
 }
 

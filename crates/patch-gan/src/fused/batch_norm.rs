@@ -49,13 +49,8 @@ pub(crate) fn batch_norm_act(
     eps: f64,
     slope: f64,
 ) -> candle_core::Result<(Tensor, Option<BatchStats>)> {
-    let saved = Arc::new(Mutex::new(None));
-    let op = BatchNormAct {
-        stats,
-        eps,
-        slope,
-        saved: Arc::clone(&saved),
-    };
+    let op = BatchNormAct::new(stats, eps, slope);
+    let saved = Arc::clone(&op.saved);
     let ys = xs
         .contiguous()?
         .apply_op3(&gamma.contiguous()?, &beta.contiguous()?, op)?;
@@ -81,11 +76,61 @@ fn lock(
         .map_err(|_| candle_core::Error::Msg("batch-norm: statistics lock poisoned".into()))
 }
 
-struct BatchNormAct {
+pub(super) struct BatchNormAct {
     stats: NormStats,
     eps: f64,
     slope: f64,
     saved: Arc<Mutex<Option<Saved>>>,
+}
+
+impl BatchNormAct {
+    pub(super) fn new(stats: NormStats, eps: f64, slope: f64) -> Self {
+        Self {
+            stats,
+            eps,
+            slope,
+            saved: Arc::new(Mutex::new(None)),
+        }
+    }
+
+    /// The batch statistics the forward pass measured (with [`NormStats::Batch`]).
+    pub(super) fn measured(&self) -> candle_core::Result<Option<BatchStats>> {
+        Ok(lock(&self.saved)?.as_ref().and_then(|s| s.batch.clone()))
+    }
+
+    /// The gradients of `sum(grad * y)` with respect to the input `x` the forward pass
+    /// normalised, gamma and beta, each if `want`ed.
+    pub(super) fn grads(
+        &self,
+        x: &Tensor,
+        grad: &Tensor,
+        want: [bool; 3],
+    ) -> candle_core::Result<[Option<Tensor>; 3]> {
+        let saved = lock(&self.saved)?
+            .clone()
+            .ok_or_else(|| candle_core::Error::Msg("batch-norm: backward before forward".into()))?;
+        let channels = saved.mean.len();
+        let backward = BatchNormActGrad {
+            saved,
+            batch: self.stats == NormStats::Batch,
+            slope: self.slope,
+            plane: channels_and_plane(x.dims()).1,
+        };
+        let packed = x.contiguous()?.apply_op2(&grad.contiguous()?, backward)?;
+        let len = x.elem_count();
+        let [want_x, want_gamma, want_beta] = want;
+        Ok([
+            want_x
+                .then(|| packed.narrow(0, 0, len)?.reshape(x.shape()))
+                .transpose()?,
+            want_gamma
+                .then(|| packed.narrow(0, len, channels))
+                .transpose()?,
+            want_beta
+                .then(|| packed.narrow(0, len + channels, channels))
+                .transpose()?,
+        ])
+    }
 }
 
 /// Per-channel `(mean, biased variance)` of `x` `(N, C, plane)`, in f64.
@@ -220,30 +265,8 @@ impl CustomOp3 for BatchNormAct {
         _y: &Tensor,
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let saved = lock(&self.saved)?
-            .clone()
-            .ok_or_else(|| candle_core::Error::Msg("batch-norm: backward before forward".into()))?;
-        let channels = saved.mean.len();
-        let backward = BatchNormActGrad {
-            saved,
-            batch: self.stats == NormStats::Batch,
-            slope: self.slope,
-            plane: channels_and_plane(x.dims()).1,
-        };
-        let packed = x.contiguous()?.apply_op2(&grad.contiguous()?, backward)?;
-        let len = x.elem_count();
-        let grad_x = x
-            .track_op()
-            .then(|| packed.narrow(0, 0, len)?.reshape(x.shape()))
-            .transpose()?;
-        let grad_gamma = gamma
-            .track_op()
-            .then(|| packed.narrow(0, len, channels))
-            .transpose()?;
-        let grad_beta = beta
-            .track_op()
-            .then(|| packed.narrow(0, len + channels, channels))
-            .transpose()?;
+        let want = [x.track_op(), gamma.track_op(), beta.track_op()];
+        let [grad_x, grad_gamma, grad_beta] = self.grads(x, grad, want)?;
         Ok((grad_x, grad_gamma, grad_beta))
     }
 }

@@ -11,9 +11,11 @@
 
 mod batch_norm;
 mod channel_sum;
+mod conv_batch_norm;
 mod leaky;
 
-pub(crate) use batch_norm::{batch_norm_act, NormStats};
+pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
+pub(crate) use conv_batch_norm::conv_batch_norm_act;
 pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
