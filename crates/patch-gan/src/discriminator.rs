@@ -7,7 +7,7 @@ use rand::Rng;
 
 use crate::conv::{layer_tensors, op, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::fused::{bias_leaky_relu, leaky_grad};
+use crate::fused::{bias_leaky_relu, conv_bias_leaky, leaky_grad};
 use crate::norm::LEAKY_SLOPE;
 use crate::wgan::{mixed_images, penalty_of_gradient, GradientPenalty};
 
@@ -374,8 +374,14 @@ impl<const AXES: usize> Module for PatchDiscriminator<AXES> {
         self.check_input(xs)?;
         let mut x = Self::lift(xs).map_err(candle_core::Error::wrap)?;
         for layer in &self.blocks {
-            let convolved = Self::conv(&x, &layer.weight)?;
-            x = bias_leaky_relu(&convolved, &layer.bias, LEAKY_SLOPE)?;
+            x = if x.rank() == 5 && x.device().is_cpu() {
+                // One op: no graph node (and gradient accumulation) for the convolution.
+                let kernel = Self::kernel_3d(&layer.weight)?;
+                let cfg = ConvConfig::default();
+                conv_bias_leaky(&x, &kernel, cfg, &layer.bias, LEAKY_SLOPE)?
+            } else {
+                bias_leaky_relu(&Self::conv(&x, &layer.weight)?, &layer.bias, LEAKY_SLOPE)?
+            };
         }
         let ys = crate::fused::bias_add(&Self::conv(&x, &self.tail.weight)?, &self.tail.bias)?;
         Ok(Self::lower(&ys)?)

@@ -120,20 +120,12 @@ fn lock(
 
 #[cfg(test)]
 mod tests {
-    use candle_core::{DType, Device, Var};
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
+    use candle_core::{DType, Var};
 
     use super::*;
     use crate::conv::op::conv3d;
     use crate::fused::batch_norm_act;
-
-    fn random(shape: &[usize], seed: u64) -> Tensor {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let n = shape.iter().product();
-        let values: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-        Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
-    }
+    use crate::fused::tests::random;
 
     /// The fused op against `conv3d` then `batch_norm_act`: the same outputs, statistics and
     /// gradients (bit for bit: the same kernels), on the im2col kernel (3 input channels) and

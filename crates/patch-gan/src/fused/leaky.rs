@@ -176,7 +176,7 @@ impl CustomOp2 for LeakyGrad {
 }
 
 /// `(x, bias) -> LeakyReLU(x + bias along axis 1)`.
-struct BiasLeaky(f64);
+pub(super) struct BiasLeaky(pub(super) f64);
 
 /// The kernel of [`BiasLeaky`] for one input shape.
 struct BiasLeakyKernel {

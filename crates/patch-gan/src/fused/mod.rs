@@ -12,10 +12,12 @@
 mod batch_norm;
 mod channel_sum;
 mod conv_batch_norm;
+mod conv_leaky;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
 pub(crate) use conv_batch_norm::conv_batch_norm_act;
+pub(crate) use conv_leaky::conv_bias_leaky;
 pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
@@ -115,7 +117,19 @@ fn channels_and_plane(dims: &[usize]) -> (usize, usize) {
 
 #[cfg(test)]
 mod tests {
+    use candle_core::{Device, Tensor};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     use super::*;
+
+    /// An f64 tensor of `shape`, uniform in [-1, 1) from `seed`.
+    pub(crate) fn random(shape: &[usize], seed: u64) -> Tensor {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = shape.iter().product();
+        let values: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
+    }
 
     #[test]
     fn lane_sums_equal_plain_sums_for_every_tail_length() {
@@ -191,3 +205,4 @@ mod tests {
         }
     }
 }
+
