@@ -125,7 +125,7 @@ mod tests {
     use super::*;
     use crate::conv::op::conv3d;
     use crate::fused::batch_norm_act;
-    use crate::fused::tests::random;
+    use crate::fused::tests::{assert_same_values_and_gradients, random};
 
     /// The fused op against `conv3d` then `batch_norm_act`: the same outputs, statistics and
     /// gradients (bit for bit: the same kernels), on the im2col kernel (3 input channels) and
@@ -148,30 +148,16 @@ mod tests {
             let (plain, plain_stats) =
                 batch_norm_act(&convolved, &gamma, &beta, NormStats::Batch, eps, slope).unwrap();
             assert_eq!(fused.dtype(), DType::F64);
-            let as_vec = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
-            assert_eq!(as_vec(&fused), as_vec(&plain), "{c_in} channels: outputs");
             assert_eq!(fused_stats, plain_stats);
             assert!(fused_stats.is_some());
-
-            let grads = |y: &Tensor| {
-                (y * &weights)
-                    .unwrap()
-                    .sum_all()
-                    .unwrap()
-                    .backward()
-                    .unwrap()
-            };
-            let (g_fused, g_plain) = (grads(&fused), grads(&plain));
-            for (name, var) in [
+            let vars = [
                 ("x", &x),
                 ("kernel", &k),
                 ("gamma", &gamma),
                 ("beta", &beta),
-            ] {
-                let a = as_vec(g_fused.get(var).unwrap());
-                let b = as_vec(g_plain.get(var).unwrap());
-                assert_eq!(a, b, "{c_in} channels: gradient of {name}");
-            }
+            ];
+            let case = format!("{c_in} channels");
+            assert_same_values_and_gradients((&fused, &plain), &weights, &vars, &case);
         }
     }
 }

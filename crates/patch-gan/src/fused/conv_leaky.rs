@@ -74,7 +74,7 @@ mod tests {
     use super::*;
     use crate::conv::op::conv3d;
     use crate::fused::bias_leaky_relu;
-    use crate::fused::tests::random;
+    use crate::fused::tests::{assert_same_values_and_gradients, random};
 
     /// The fused op against `conv3d` then `bias_leaky_relu`: the same outputs and gradients,
     /// bit for bit, on the im2col kernel (3 input channels) and the Winograd one (16).
@@ -88,22 +88,9 @@ mod tests {
             let cfg = ConvConfig::default();
             let fused = conv_bias_leaky(&x, &k, cfg, &bias, 0.2).unwrap();
             let plain = bias_leaky_relu(&conv3d(&x, &k, cfg).unwrap(), &bias, 0.2).unwrap();
-            let as_vec = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
-            assert_eq!(as_vec(&fused), as_vec(&plain), "{c_in} channels: outputs");
-            let grads = |y: &Tensor| {
-                (y * &weights)
-                    .unwrap()
-                    .sum_all()
-                    .unwrap()
-                    .backward()
-                    .unwrap()
-            };
-            let (g_fused, g_plain) = (grads(&fused), grads(&plain));
-            for (name, var) in [("x", &x), ("kernel", &k), ("bias", &bias)] {
-                let a = as_vec(g_fused.get(var).unwrap());
-                let b = as_vec(g_plain.get(var).unwrap());
-                assert_eq!(a, b, "{c_in} channels: gradient of {name}");
-            }
+            let vars = [("x", &x), ("kernel", &k), ("bias", &bias)];
+            let case = format!("{c_in} channels");
+            assert_same_values_and_gradients((&fused, &plain), &weights, &vars, &case);
         }
     }
 }

@@ -117,7 +117,7 @@ fn channels_and_plane(dims: &[usize]) -> (usize, usize) {
 
 #[cfg(test)]
 mod tests {
-    use candle_core::{Device, Tensor};
+    use candle_core::{Device, Tensor, Var};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -129,6 +129,33 @@ mod tests {
         let n = shape.iter().product();
         let values: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
         Tensor::from_vec(values, shape, &Device::Cpu).unwrap()
+    }
+
+    /// Asserts that a fused op's output `fused` and its unfused composition's `plain` have the
+    /// same values, and the same gradients of `sum(weights * y)` with respect to `vars`, bit for
+    /// bit (f64 values compared with `==`).
+    pub(crate) fn assert_same_values_and_gradients(
+        (fused, plain): (&Tensor, &Tensor),
+        weights: &Tensor,
+        vars: &[(&str, &Var)],
+        case: &str,
+    ) {
+        let as_vec = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        assert_eq!(as_vec(fused), as_vec(plain), "{case}: outputs");
+        let grads = |y: &Tensor| {
+            (y * weights)
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .backward()
+                .unwrap()
+        };
+        let (of_fused, of_plain) = (grads(fused), grads(plain));
+        for (name, var) in vars {
+            let a = as_vec(of_fused.get(var).unwrap());
+            let b = as_vec(of_plain.get(var).unwrap());
+            assert_eq!(a, b, "{case}: gradient of {name}");
+        }
     }
 
     #[test]
@@ -205,4 +232,3 @@ mod tests {
         }
     }
 }
-
