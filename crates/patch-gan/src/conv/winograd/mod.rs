@@ -143,7 +143,7 @@ impl Plan {
         let per_row = positions * (g.c_in + g.c_out) * (axes[2].tiles + 1);
         let rows = axes[0].tiles * axes[1].tiles;
         let most = (CHUNK_TARGET_ELEMS / per_row).clamp(1, rows);
-        // An even number of chunks of nearly equal rows (never one row more than another), so
+        // An even number of chunks of nearly equal rows (sizes at most one row apart), so
         // that two threads get equal shares: 28^3's 49 rows in chunks of 9 left the last
         // chunk 4 rows and one thread 27 rows against 22. Fixed by the geometry alone, not the
         // threads, so the weight gradient's sums keep their bits on any number of threads.
