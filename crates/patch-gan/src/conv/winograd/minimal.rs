@@ -162,7 +162,8 @@ fn along_axis<const I: usize, const O: usize>(
 }
 
 /// The weights' transform (`G` or its adjoint) for a block of channel pairs: `map` along every
-/// axis with 3 taps of `buf`, laid out `(tap or position, pair)` with `pairs` per row and
+/// axis with 3 taps of `buf`, laid out `(tap or position, pair)` with `pairs` (the block's
+/// width) per row and
 /// `shape` the block of taps or positions, with `tmp` as the other buffer. Returns the buffer
 /// holding the result. Vectorised across pairs: one tile at a time, this was 8% of the 28^3
 /// generator step.

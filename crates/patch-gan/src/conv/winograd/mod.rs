@@ -41,7 +41,7 @@ mod rows;
 use minimal::{map_pair_blocks, transform_weights, Minimal, F2, F4};
 use rows::{deinterleave, interleave, map_d_then_h, map_into};
 
-/// Elements of the transformed inputs plus products a chunk holds at most (f32: 8 MiB, eight
+/// Elements of the transformed inputs plus products a chunk aims at (f32: 8 MiB, eight
 /// times a core's L2 cache here; the matrices are streamed through once). Measured, 2 threads,
 /// with an even number of equal chunks (`Plan::new`): 2^21 as fast as 2^20 at 28^3 and 54^2,
 /// 2-5% faster from 40^3 (fewer, longer products and transform loops). With chunks of a fixed
@@ -374,8 +374,9 @@ struct ForwardPass<'a, T> {
 }
 
 /// The per-task scratch of a pass: transformed inputs, products (or transformed output
-/// gradients), rows. Every chunk writes each value it reads first, so a scratch is reused from
-/// the thread's pool as it is ([`scratch_for`]).
+/// gradients), rows. Every chunk writes each value it reads first, but for the padding of the
+/// matrices' rows ([`matrix_stride`]), whose products are never read; so a scratch is reused
+/// from the thread's pool as it is ([`scratch_for`]).
 struct ForwardScratch<T> {
     v: Vec<T>,
     m: Vec<T>,
@@ -547,7 +548,9 @@ struct WeightGradPass<'a, T> {
 }
 
 /// One chunk of a weight-gradient pass: transform its input tiles (into `scratch.v`) and its
-/// output-gradient tiles (into `scratch.m`), and add their products per position to `du`.
+/// output-gradient tiles (into `scratch.m`), and write their products per position to `du`
+/// (`first`: the block's first chunk) or add them to it. `du` has room for `positions x C_out x
+/// C_in` values.
 #[inline(always)]
 fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     pass: &WeightGradPass<'_, T>,
@@ -570,6 +573,11 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
         expand_output_grads::<T, W, M, N>(z, bufs, go_c, (c, co), (g, plan), (row0, rows));
     }
     // The capacity, not the length: `du` is unwritten until the first chunk's products.
+    // The matrix products below write through this pointer: it must have room for them all.
+    assert!(
+        du.capacity() >= p * co * ci,
+        "weight gradient: du too small"
+    );
     let du = du.spare_capacity_mut().as_mut_ptr().cast::<T>();
     for pos in 0..p {
         // SAFETY: dU[pos] is co x ci, Z[pos] co x cols, V[pos]^T cols x ci (rows `ld` apart),
