@@ -8,7 +8,8 @@ use candle_nn::{Module, VarBuilder};
 use crate::active::{self, ActiveSites};
 use crate::conv::{conv3d, op, Conv3d, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::norm::{batch_norm3d, BatchNorm3d, LEAKY_SLOPE};
+use crate::fused::{bias_add, conv_norm_stack};
+use crate::norm::{batch_norm3d, BatchNorm3d, LEAKY_SLOPE, NORM_EPS};
 
 /// Shape of a [`Generator3d`]. The default is the paper's G_1 with L = 5 (table "generators"):
 /// 3 input channels (noise plus the CSG grid), 32 hidden channels, 4 output channels
@@ -323,14 +324,41 @@ impl Generator3d {
     }
 }
 
+impl Generator3d {
+    /// [`ModuleT::forward_t`] in training mode on the CPU: every layer in one op (the same
+    /// kernels and bits as layer by layer; see [`crate::fused::conv_norm_stack`]), then the
+    /// last layer's bias. The blocks' convolutions have biases that batch statistics cancel:
+    /// they go to the running means only.
+    fn forward_train_cpu(&self, xs: &Tensor) -> candle_core::Result<Tensor> {
+        let blocks: Vec<_> = self
+            .blocks
+            .iter()
+            .map(|(conv, bn)| bn.stack_block(conv.weight()))
+            .collect();
+        let eps_slope = (NORM_EPS, LEAKY_SLOPE);
+        let cfg = self.tail.config();
+        let (ys, stats) = conv_norm_stack(xs, &blocks, self.tail.weight(), cfg, eps_slope)?;
+        for ((conv, bn), stats) in self.blocks.iter().zip(stats) {
+            bn.record(stats, conv.bias())?;
+        }
+        match self.tail.bias() {
+            Some(bias) => bias_add(&ys, bias),
+            None => Ok(ys),
+        }
+    }
+}
+
 impl ModuleT for Generator3d {
     fn forward_t(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
+        if train && xs.device().is_cpu() {
+            return self.forward_train_cpu(xs);
+        }
         let mut h = xs.clone();
         for (conv, bn) in &self.blocks {
             // The convolution's bias goes to the fused BatchNorm + LeakyReLU, which needs it in
             // eval mode only (batch statistics cancel it).
-            let conv = (conv.weight(), conv.config(), conv.bias());
-            h = bn.forward_convolved(&h, conv, LEAKY_SLOPE, train)?;
+            let convolved = op::conv3d(&h, conv.weight(), conv.config())?;
+            h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
         }
         self.tail.forward(&h)
     }

@@ -3,10 +3,9 @@
 use candle_core::{DType, ModuleT, Tensor, Var};
 use candle_nn::{Init, Module, VarBuilder};
 
-use crate::conv::{op, ConvConfig};
 use crate::error::{invalid, Result};
 pub use crate::fused::leaky_relu;
-use crate::fused::{batch_norm_act, conv_batch_norm_act, BatchStats, NormStats};
+use crate::fused::{batch_norm_act, BatchStats, NormStats, StackBlock};
 
 /// PyTorch's default `eps` for both normalisations.
 pub const NORM_EPS: f64 = 1e-5;
@@ -130,31 +129,19 @@ impl BatchNorm3d {
         Ok(ys)
     }
 
-    /// [`Self::forward_activated`] of `conv3d(xs, kernel, cfg)` (the convolution's bias is
-    /// `input_bias`). In train mode on the CPU the convolution and the normalisation are one
-    /// op (same kernels, same bits), whose backward pass skips candle's accumulation of the
-    /// convolution's output gradient.
-    pub(crate) fn forward_convolved(
-        &self,
-        xs: &Tensor,
-        (kernel, cfg, input_bias): (&Tensor, ConvConfig, Option<&Tensor>),
-        negative_slope: f64,
-        train: bool,
-    ) -> candle_core::Result<Tensor> {
-        if !train || !xs.device().is_cpu() {
-            let convolved = op::conv3d(xs, kernel, cfg)?;
-            return self.forward_activated(&convolved, input_bias, negative_slope, train);
+    /// This layer as a block of a [`crate::fused::conv_norm_stack`] after a convolution by
+    /// `kernel`: the training-mode generators run all their layers as one op.
+    pub(crate) fn stack_block<'a>(&'a self, kernel: &'a Tensor) -> StackBlock<'a> {
+        StackBlock {
+            kernel,
+            gamma: &self.weight,
+            beta: &self.bias,
         }
-        let gamma_beta = Tensor::cat(&[&self.weight, &self.bias], 0)?;
-        let (ys, stats) =
-            conv_batch_norm_act(xs, kernel, cfg, &gamma_beta, (NORM_EPS, negative_slope))?;
-        self.record(stats, input_bias)?;
-        Ok(ys)
     }
 
     /// Folds a train-mode pass's batch statistics into the running ones; the batch's mean is
     /// taken after `input_bias` (PyTorch's convolution would have added it).
-    fn record(
+    pub(crate) fn record(
         &self,
         stats: Option<BatchStats>,
         input_bias: Option<&Tensor>,

@@ -407,7 +407,15 @@ fn wanted(
     arg: &Tensor,
     compute: impl FnOnce() -> candle_core::Result<Tensor>,
 ) -> candle_core::Result<Option<Tensor>> {
-    if arg.track_op() {
+    wanted_if(arg.track_op(), compute)
+}
+
+/// The gradient `compute` gives if `want`.
+fn wanted_if(
+    want: bool,
+    compute: impl FnOnce() -> candle_core::Result<Tensor>,
+) -> candle_core::Result<Option<Tensor>> {
+    if want {
         compute().map(Some)
     } else {
         Ok(None)
@@ -433,7 +441,22 @@ pub(crate) fn grid_conv_grads(
     cfg: ConvConfig,
     grad: &Tensor,
 ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-    ConvOp(Domain::Grid(Spec::uniform(cfg))).grads(&xs.contiguous()?, &kernel.contiguous()?, grad)
+    let want = [xs.track_op(), kernel.track_op()];
+    grid_conv_grads_wanted(xs, kernel, cfg, grad, want)
+}
+
+/// [`grid_conv_grads`] for the gradients `want` asks for (`[xs, kernel]`), whether or not the
+/// arguments are part of the autograd graph: for ops that run several layers and keep the
+/// inner layers' inputs as plain tensors.
+pub(crate) fn grid_conv_grads_wanted(
+    xs: &Tensor,
+    kernel: &Tensor,
+    cfg: ConvConfig,
+    grad: &Tensor,
+    want: [bool; 2],
+) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+    let (xs, kernel) = (xs.contiguous()?, kernel.contiguous()?);
+    ConvOp(Domain::Grid(Spec::uniform(cfg))).grads(&xs, &kernel, grad, want)
 }
 
 /// Forward op: `(x, kernel) -> y`.
@@ -446,15 +469,16 @@ impl ConvOp {
         xs: &Tensor,
         kernel: &Tensor,
         grad: &Tensor,
+        [want_xs, want_kernel]: [bool; 2],
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        let grad_xs = wanted(xs, || {
+        let grad_xs = wanted_if(want_xs, || {
             apply(
                 grad,
                 kernel,
                 GradInputOp(self.0.clone(), xs.shape().clone()),
             )
         })?;
-        let grad_kernel = wanted(kernel, || {
+        let grad_kernel = wanted_if(want_kernel, || {
             apply(
                 xs,
                 grad,
@@ -490,7 +514,7 @@ impl CustomOp2 for ConvOp {
         _res: &Tensor,
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        self.grads(xs, kernel, grad)
+        self.grads(xs, kernel, grad, [xs.track_op(), kernel.track_op()])
     }
 }
 

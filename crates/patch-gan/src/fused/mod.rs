@@ -11,13 +11,13 @@
 
 mod batch_norm;
 mod channel_sum;
-mod conv_batch_norm;
 mod conv_leaky;
+mod conv_stack;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
-pub(crate) use conv_batch_norm::conv_batch_norm_act;
 pub(crate) use conv_leaky::conv_bias_leaky;
+pub(crate) use conv_stack::{conv_norm_stack, StackBlock};
 pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
