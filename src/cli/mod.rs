@@ -75,6 +75,13 @@ pub fn run() -> ExitCode {
     if std::env::var_os("CANDLE_NUM_THREADS").is_none() {
         std::env::set_var("CANDLE_NUM_THREADS", "1");
     }
+    // The parallel loops of training and rendering start on this thread: it is one of rayon's
+    // threads rather than sleeping while they run (see the function). After the variables
+    // above: the pool's threads are the program's first.
+    if let Err(e) = volrender::join_global_pool(None) {
+        eprintln!("error: could not start the worker threads: {e}");
+        return ExitCode::FAILURE;
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(&args),

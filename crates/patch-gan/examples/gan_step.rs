@@ -278,9 +278,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // candle sizes its own parallel loops from the variable rayon reads.
     // SAFETY: set before any thread of this program exists.
     unsafe { std::env::set_var("RAYON_NUM_THREADS", a.threads.to_string()) };
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads)
-        .build_global()?;
+    // As the `volgen` binary does: this thread is one of the pool's (see the function).
+    volrender::join_global_pool(Some(a.threads))?;
     let mut step = match a.what {
         What::Generator => generator_step(&a)?,
         What::Critic => critic_step(&a)?,

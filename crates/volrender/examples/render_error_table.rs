@@ -50,9 +50,7 @@ fn rmse(a: &[f64], b: &[f64]) -> f64 {
 
 fn main() -> Result<()> {
     let a = Args::parse();
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads)
-        .build_global()?;
+    volrender::join_global_pool(Some(a.threads))?;
     let rays = peer_rays(a.rays)?;
     println!("| scene | sampler | epsilon | skip | forward ms | colour RMSE | opacity RMSE |");
     println!("|---|---|---|---|---|---|---|");

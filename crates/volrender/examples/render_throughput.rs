@@ -98,9 +98,8 @@ fn time(
 fn main() -> Result<()> {
     let a = Args::parse();
     let mallopt = !a.no_mallopt && volrender::tune_malloc();
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads)
-        .build_global()?;
+    // As the `volgen` binary does: this thread is one of the pool's.
+    volrender::join_global_pool(Some(a.threads))?;
     let grid_npy = a
         .peer_dir
         .as_ref()

@@ -65,6 +65,7 @@ mod op;
 mod rays;
 pub mod reference;
 pub mod scenes;
+mod threads;
 mod transforms;
 
 pub use allocator::tune_malloc;
@@ -78,6 +79,7 @@ pub use error::{Error, Result};
 pub use image::{render_image, Image};
 pub use op::{render, render_batch, RenderOutput};
 pub use rays::Rays;
+pub use threads::join_global_pool;
 pub use transforms::{load_transforms, FrameCamera};
 
 /// The types most users need, for `use volrender::prelude::*`.
