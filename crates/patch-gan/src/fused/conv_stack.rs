@@ -129,17 +129,18 @@ impl CustomOp2 for Shared {
         let param = |at: usize, shape: &Shape| {
             Layout::contiguous_with_offset(shape, l2.start_offset() + at)
         };
+        // The next convolution, of the last block's output (of `xs` before the first block).
+        let convolve = |inputs: &[(CpuStorage, Shape)], kernel: &Layout| match inputs.last() {
+            None => grid_conv_storage(op.cfg, (s1, l1), (s2, kernel)),
+            Some((h, shape)) => {
+                grid_conv_storage(op.cfg, (h, &Layout::contiguous(shape)), (s2, kernel))
+            }
+        };
         let mut convolved = Vec::with_capacity(blocks);
         let mut inputs: Vec<(CpuStorage, Shape)> = Vec::with_capacity(blocks);
         for (i, norm) in op.norms.iter().enumerate() {
             let (at, channels) = op.offsets(i);
-            let kernel = param(at, &op.kernels[i]);
-            let (z, z_shape) = match inputs.last() {
-                None => grid_conv_storage(op.cfg, (s1, l1), (s2, &kernel))?,
-                Some((h, shape)) => {
-                    grid_conv_storage(op.cfg, (h, &Layout::contiguous(shape)), (s2, &kernel))?
-                }
-            };
+            let (z, z_shape) = convolve(&inputs, &param(at, &op.kernels[i]))?;
             let after_kernel = at + op.kernels[i].elem_count();
             let gamma = param(after_kernel, &Shape::from(channels));
             let beta = param(after_kernel + channels, &Shape::from(channels));
@@ -147,13 +148,7 @@ impl CustomOp2 for Shared {
             inputs.push(norm.cpu_fwd(&z, &z_layout, s2, &gamma, s2, &beta)?);
             convolved.push((z, z_shape));
         }
-        let last = param(end, &op.kernels[blocks]);
-        let out = match inputs.last() {
-            None => grid_conv_storage(op.cfg, (s1, l1), (s2, &last))?,
-            Some((h, shape)) => {
-                grid_conv_storage(op.cfg, (h, &Layout::contiguous(shape)), (s2, &last))?
-            }
-        };
+        let out = convolve(&inputs, &param(end, &op.kernels[blocks]))?;
         let tensor = |(storage, shape): (CpuStorage, Shape)| {
             Tensor::from_storage(Storage::Cpu(storage), shape, BackpropOp::none(), false)
         };
@@ -328,22 +323,12 @@ mod tests {
         let (ys2, _) = conv_norm_stack(&tracked, &block, &last, cfg, (1e-5, 0.2)).unwrap();
         let grads2 = ys2.sqr().unwrap().sum_all().unwrap().backward().unwrap();
         assert!(grads2.get(&tracked).is_some());
+        let values = |grads: &candle_core::backprop::GradStore, var: &Var| {
+            let grad = grads.get(var).unwrap().flatten_all().unwrap();
+            grad.to_vec1::<f64>().unwrap()
+        };
         for var in [&kernel, &gamma, &beta, &last] {
-            let a = grads
-                .get(var)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f64>()
-                .unwrap();
-            let b = grads2
-                .get(var)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f64>()
-                .unwrap();
-            assert_eq!(a, b);
+            assert_eq!(values(&grads, var), values(&grads2, var));
         }
     }
 }
