@@ -336,7 +336,9 @@ impl Generator3d {
             .map(|(conv, bn)| bn.stack_block(conv.weight()))
             .collect();
         let eps_slope = (NORM_EPS, LEAKY_SLOPE);
+        // One configuration for all layers, as `Generator3d::new` builds them.
         let cfg = self.tail.config();
+        debug_assert!(self.blocks.iter().all(|(conv, _)| conv.config() == cfg));
         let (ys, stats) = conv_norm_stack(xs, &blocks, self.tail.weight(), cfg, eps_slope)?;
         for ((conv, bn), stats) in self.blocks.iter().zip(stats) {
             bn.record(stats, conv.bias())?;

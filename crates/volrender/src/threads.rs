@@ -7,13 +7,15 @@
 ///
 /// With rayon's own default the calling thread is not in the pool: every parallel loop it
 /// starts is handed to the pool's threads while it sleeps, and woken again at the end, two
-/// thread switches per loop. A training step runs hundreds of short loops (a 28^3 generator
-/// step about 50, each a fraction of a millisecond), so on two cores those hand-overs cost 4-5%
+/// thread switches per loop. A training step runs many short loops (a 28^3 generator step
+/// about 50, each a fraction of a millisecond), so on two cores those hand-overs cost 4-5%
 /// of a generator step and 9% of a critic step (docs/performance-patch-gan.md). In the pool,
 /// the calling thread runs its own share of each loop and the other threads steal the rest.
 ///
-/// Work that threads outside the pool hand to it runs on the pool's other threads only (none
-/// when `threads` is 1): start parallel work from the calling thread.
+/// Work that threads outside the pool hand to it runs on the pool's other threads only; with
+/// `threads` = 1 there are none, and such work waits until the calling thread enters rayon
+/// (a caller that blocks on it meanwhile never returns): start parallel work from the calling
+/// thread. Nothing in this workspace starts it from another.
 ///
 /// ```
 /// use rayon::prelude::*;

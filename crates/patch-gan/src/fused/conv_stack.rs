@@ -5,8 +5,9 @@
 //! [`super::batch_norm_act`]), with the same bits; what goes is the graph nodes between them.
 //! candle's backward pass adds every gradient it meets into a fresh zero tensor of its node's
 //! size: a `zeros_like` and an `add` of a whole layer per block, on the calling thread while the
-//! kernels' threads waited. Here the gradient flows from layer to layer inside the op; only the
-//! stack's input, its output and the parameters (packed into one vector) are graph nodes.
+//! kernels' threads waited. Here the gradient flows from layer to layer inside the op: what
+//! candle still accumulates is the stack's input and output, and the parameters (packed into
+//! one vector, so each parameter's own small gradient too).
 
 use std::sync::{Arc, Mutex};
 
@@ -38,7 +39,19 @@ pub(crate) fn conv_norm_stack(
 ) -> candle_core::Result<(Tensor, Vec<Option<BatchStats>>)> {
     let mut parts = Vec::with_capacity(3 * blocks.len() + 1);
     let mut layout = Vec::with_capacity(blocks.len() + 1);
-    for block in blocks {
+    for (i, block) in blocks.iter().enumerate() {
+        let channels = match block.kernel.dims() {
+            &[c_out, _, _, _, _] => c_out,
+            other => candle_core::bail!("conv-norm-stack: block {i}'s kernel {other:?} is not 5D"),
+        };
+        for (name, t) in [("gamma", block.gamma), ("beta", block.beta)] {
+            if t.dims() != [channels] {
+                candle_core::bail!(
+                    "conv-norm-stack: block {i}'s {name} {:?} should be ({channels},), one per output channel",
+                    t.dims()
+                );
+            }
+        }
         layout.push(block.kernel.shape().clone());
         parts.extend([
             block.kernel.flatten_all()?,
@@ -46,12 +59,28 @@ pub(crate) fn conv_norm_stack(
             block.beta.clone(),
         ]);
     }
+    if last.rank() != 5 {
+        candle_core::bail!(
+            "conv-norm-stack: the last kernel {:?} is not 5D",
+            last.dims()
+        );
+    }
     layout.push(last.shape().clone());
     parts.push(last.flatten_all()?);
     let params = Tensor::cat(&parts, 0)?;
+    let starts = layout
+        .iter()
+        .scan(0, |at, shape| {
+            let start = *at;
+            // The kernel, then gamma and beta: one value per output channel each.
+            *at += shape.elem_count() + 2 * shape.dims()[0];
+            Some(start)
+        })
+        .collect();
     let op = Arc::new(ConvNormStack {
         cfg,
         kernels: layout,
+        starts,
         norms: blocks
             .iter()
             .map(|_| BatchNormAct::new(NormStats::Batch, eps, slope))
@@ -74,6 +103,8 @@ struct ConvNormStack {
     cfg: ConvConfig,
     /// The kernels' shapes, the blocks' then the last convolution's.
     kernels: Vec<Shape>,
+    /// Where each kernel starts in the packed parameters (a block's gamma and beta follow it).
+    starts: Vec<usize>,
     norms: Vec<BatchNormAct>,
     /// What the forward pass leaves for the backward pass, as the graph nodes it replaces held
     /// it.
@@ -85,18 +116,6 @@ struct ConvNormStack {
 struct Saved {
     convolved: Vec<Tensor>,
     inputs: Vec<Tensor>,
-}
-
-impl ConvNormStack {
-    /// Where block `i`'s kernel, gamma and beta start in the packed parameters (`i` = the
-    /// number of blocks: the last kernel), and the block's channels.
-    fn offsets(&self, i: usize) -> (usize, usize) {
-        let mut at = 0;
-        for shape in &self.kernels[..i] {
-            at += shape.elem_count() + 2 * shape.dims()[0];
-        }
-        (at, self.kernels[i].dims()[0])
-    }
 }
 
 /// The op as candle holds it, `(xs, params) -> ys`, sharing its state with
@@ -117,7 +136,7 @@ impl CustomOp2 for Shared {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let op = &self.0;
         let blocks = op.norms.len();
-        let (end, _) = op.offsets(blocks);
+        let end = op.starts[blocks];
         let expected = end + op.kernels[blocks].elem_count();
         if !l2.is_contiguous() || l2.shape().elem_count() != expected {
             candle_core::bail!(
@@ -139,7 +158,7 @@ impl CustomOp2 for Shared {
         let mut convolved = Vec::with_capacity(blocks);
         let mut inputs: Vec<(CpuStorage, Shape)> = Vec::with_capacity(blocks);
         for (i, norm) in op.norms.iter().enumerate() {
-            let (at, channels) = op.offsets(i);
+            let (at, channels) = (op.starts[i], op.kernels[i].dims()[0]);
             let (z, z_shape) = convolve(&inputs, &param(at, &op.kernels[i]))?;
             let after_kernel = at + op.kernels[i].elem_count();
             let gamma = param(after_kernel, &Shape::from(channels));
@@ -175,9 +194,8 @@ impl CustomOp2 for Shared {
         // The kernels as plain tensors: the gradients below are made, not differentiated again.
         let params_value = params.detach();
         let kernel = |i: usize| {
-            let (at, _) = op.offsets(i);
             params_value
-                .narrow(0, at, op.kernels[i].elem_count())?
+                .narrow(0, op.starts[i], op.kernels[i].elem_count())?
                 .reshape(&op.kernels[i])
         };
         let blocks = op.norms.len();
@@ -194,7 +212,10 @@ impl CustomOp2 for Shared {
         )?;
         param_grads.extend(grad_last.map(|g| g.flatten_all()).transpose()?);
         for i in (0..blocks).rev() {
-            let Some(grad_out) = grad_h else { break };
+            // Every block after the first asks for its input's gradient (`want_input`).
+            let grad_out = grad_h.ok_or_else(|| {
+                candle_core::Error::Msg(format!("{}: no gradient into block {i}", self.name()))
+            })?;
             let [grad_z, grad_gamma, grad_beta] = op.norms[i].grads(
                 &saved.convolved[i],
                 &grad_out,
@@ -330,5 +351,30 @@ mod tests {
         for var in [&kernel, &gamma, &beta, &last] {
             assert_eq!(values(&grads, var), values(&grads2, var));
         }
+    }
+
+    /// Parameters of the wrong shape are errors that name the block and the parameter.
+    #[test]
+    fn misshapen_parameters_are_named() {
+        let cfg = ConvConfig::default().with_padding(1);
+        let x = random(&[1, 3, 4, 4, 4], 1);
+        let kernel = random(&[5, 3, 3, 3, 3], 2);
+        let (gamma, short_beta) = (random(&[5], 3), random(&[4], 4));
+        let last = random(&[2, 5, 3, 3, 3], 5);
+        let block = [StackBlock {
+            kernel: &kernel,
+            gamma: &gamma,
+            beta: &short_beta,
+        }];
+        let err = conv_norm_stack(&x, &block, &last, cfg, (1e-5, 0.2)).unwrap_err();
+        assert!(err.to_string().contains("block 0's beta [4]"), "{err}");
+        let flat = kernel.flatten_all().unwrap();
+        let block = [StackBlock {
+            kernel: &flat,
+            gamma: &gamma,
+            beta: &gamma,
+        }];
+        let err = conv_norm_stack(&x, &block, &last, cfg, (1e-5, 0.2)).unwrap_err();
+        assert!(err.to_string().contains("not 5D"), "{err}");
     }
 }
