@@ -16,6 +16,8 @@ pub(crate) trait Element:
 {
     const ZERO: Self;
     const ONE: Self;
+    /// Whether this is `f32`, for kernels with an f32-only build (a pointer cast then keeps the type).
+    const IS_F32: bool;
 
     fn to_f64(self) -> f64;
 
@@ -25,6 +27,7 @@ pub(crate) trait Element:
 impl Element for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const IS_F32: bool = true;
 
     fn to_f64(self) -> f64 {
         f64::from(self)
@@ -38,6 +41,7 @@ impl Element for f32 {
 impl Element for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    const IS_F32: bool = false;
 
     fn to_f64(self) -> f64 {
         self

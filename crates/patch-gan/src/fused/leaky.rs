@@ -1,8 +1,9 @@
 //! LeakyReLU and bias + LeakyReLU as custom ops whose gradients are themselves differentiable, as
 //! the WGAN-GP penalty (a gradient of the critic's input gradient) needs.
 
+use std::mem::MaybeUninit;
+
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Shape, Tensor};
-use rayon::prelude::*;
 
 use super::channel_sum::channel_sum;
 use super::{channels_and_plane, slope_at, CHUNK};
@@ -93,15 +94,31 @@ pub(crate) fn leaky_grad(
         .apply_op2(&output.detach().contiguous()?, LeakyGrad(slope))
 }
 
+/// `len` values made [`CHUNK`] at a time in parallel: `fill(start, dst)` writes the values
+/// `start..start + dst.len()`. Plain loops over slices, which the compiler vectorises: rayon's
+/// zipped `map` + `collect` wrote one value per call through its consumer (6% of a 54^2 critic
+/// step's samples on an AVX2 machine).
+fn map_chunks<T: Element>(
+    len: usize,
+    fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync,
+) -> Vec<T> {
+    let mut out = unwritten(len);
+    // SAFETY: `fill` writes every value of its chunk (both callers zip the chunk with inputs
+    // at least as long).
+    unsafe { extend_par_chunks(&mut out, len, CHUNK, |i, dst| fill(i * CHUNK, dst)) };
+    out
+}
+
 struct Leaky(f64);
 
 impl Kernel for Leaky {
     fn run<T: Element>(&self, x: &[T], _: &[T]) -> candle_core::Result<Vec<T>> {
         let slope = T::from_f64(self.0);
-        Ok(x.par_iter()
-            .with_min_len(CHUNK)
-            .map(|&v| v * slope_at(v, slope))
-            .collect())
+        Ok(map_chunks(x.len(), |start, dst| {
+            for (d, &v) in dst.iter_mut().zip(&x[start..]) {
+                d.write(v * slope_at(v, slope));
+            }
+        }))
     }
 }
 
@@ -128,12 +145,11 @@ struct LeakyGrad(f64);
 impl Kernel for LeakyGrad {
     fn run<T: Element>(&self, grad: &[T], y: &[T]) -> candle_core::Result<Vec<T>> {
         let slope = T::from_f64(self.0);
-        Ok(grad
-            .par_iter()
-            .zip(y.par_iter())
-            .with_min_len(CHUNK)
-            .map(|(&g, &y)| g * slope_at(y, slope))
-            .collect())
+        Ok(map_chunks(grad.len(), |start, dst| {
+            for ((d, &g), &y) in dst.iter_mut().zip(&grad[start..]).zip(&y[start..]) {
+                d.write(g * slope_at(y, slope));
+            }
+        }))
     }
 }
 

@@ -36,9 +36,11 @@ use crate::output::unwritten;
 use crate::simd::has_avx2;
 
 mod minimal;
+mod products;
 mod rows;
 
 use minimal::{map_pair_blocks, transform_weights, Minimal, F2, F4};
+use products::forward_product;
 use rows::{deinterleave, interleave, map_d_then_h, map_into};
 
 /// Elements of the transformed inputs plus products a chunk aims at (f32: 8 MiB, eight
@@ -432,12 +434,11 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     for pos in 0..p {
         // SAFETY: U[pos] is co x ci, V[pos] ci x ld, M[pos] co x ld, all in bounds.
         unsafe {
-            matmul(
-                (co, ld, ci),
-                (m[pos * co * ld..].as_mut_ptr(), ld as isize, 1),
-                (pass.u[pos * co * ci..].as_ptr(), ci as isize, 1),
-                (v[pos * ci * ld..].as_ptr(), ld as isize, 1),
-                false,
+            forward_product(
+                (co, ci, ld),
+                m[pos * co * ld..].as_mut_ptr(),
+                pass.u[pos * co * ci..].as_ptr(),
+                v[pos * ci * ld..].as_ptr(),
             )
         };
     }
