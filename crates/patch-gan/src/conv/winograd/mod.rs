@@ -21,7 +21,7 @@
 //! F(2, 3) uses the points 0, 1, -1 (entries 0, ±1, ±1/2) and rounds about as well as the direct
 //! sum; F(4, 3) adds ±2 (entries up to 8 and 1/24) and rounds worse, by the factor its tests
 //! state. Work is split into chunks of rows of tiles of one batch item, each a few times the L2
-//! cache in transformed inputs and products (streamed through once; see `CHUNK_TARGET_ELEMS`).
+//! cache in transformed inputs and products (streamed through once; see `chunk_target`).
 //!
 //! The 1D transforms and the weights' transform are in `minimal`, the row-wise maps and the
 //! split of rows into phases in `rows`; this module tiles a convolution and runs its passes.
@@ -40,15 +40,34 @@ mod products;
 mod rows;
 
 use minimal::{map_pair_blocks, transform_weights, Minimal, F2, F4};
-use products::forward_product;
+use products::{forward_product, weight_product};
 use rows::{deinterleave, interleave, map_d_then_h, map_into};
 
-/// Elements of the transformed inputs plus products a chunk aims at (f32: 8 MiB, eight
-/// times a core's L2 cache here; the matrices are streamed through once). Measured, 2 threads,
-/// with an even number of equal chunks (`Plan::new`): 2^21 as fast as 2^20 at 28^3 and 54^2,
-/// 2-5% faster from 40^3 (fewer, longer products and transform loops). With chunks of a fixed
+/// Elements of the transformed inputs plus products a chunk aims at, with `gemm`'s products
+/// (f32: 8 MiB, eight times a core's L2 cache on the AVX-512 machine it was measured on; the
+/// matrices are streamed through once). Measured there, 2 threads, with an even number of equal
+/// chunks (`Plan::new`): 2^21 as fast as 2^20 at 28^3 and 54^2, 2-5% faster from 40^3 (fewer,
+/// longer products and transform loops); 2^18, 2^19 and 2^22 slower. With chunks of a fixed
 /// row count instead, 2^21 had left 28^3 three chunks for two threads.
 const CHUNK_TARGET_ELEMS: usize = 1 << 21;
+
+/// [`CHUNK_TARGET_ELEMS`] with our own products (`products`, AVX2 without AVX-512): 2 MiB of
+/// f32. Those read their right operand in place, a panel at a time, where `gemm` packs it: a
+/// chunk whose matrices stay nearer the core pays. Measured on a Zen 3 machine (512 KiB of L2
+/// per core), 2 threads, `gan_step` medians of 3 alternated runs: the 108^2 critic 0.143 s at
+/// 2^21, 0.111-0.125 s at 2^20, 2^19 and 2^18; 40^3 0.278 s at 2^21, 0.223 s at 2^19, 0.260 s
+/// at 2^18; 28^3 and the 54^2 critic 2-6% faster at 2^19.
+const CHUNK_TARGET_ELEMS_OWN_PRODUCTS: usize = 1 << 19;
+
+/// The chunk target of this CPU: the chunks, and so the weight gradient's partial sums, depend
+/// on the instruction set as the products' roundings do, never on the thread count.
+fn chunk_target() -> usize {
+    if products::own_kernels() {
+        CHUNK_TARGET_ELEMS_OWN_PRODUCTS
+    } else {
+        CHUNK_TARGET_ELEMS
+    }
+}
 
 /// Row stride of the transformed matrices: a chunk's columns rounded up to 16. `gemm` multiplies
 /// an operand whose rows are a whole number of its 16-lane vectors where it lies, and copies
@@ -144,7 +163,7 @@ impl Plan {
         let positions: usize = axes.iter().map(|a| a.ins).product();
         let per_row = positions * (g.c_in + g.c_out) * (axes[2].tiles + 1);
         let rows = axes[0].tiles * axes[1].tiles;
-        let most = (CHUNK_TARGET_ELEMS / per_row).clamp(1, rows);
+        let most = (chunk_target() / per_row).clamp(1, rows);
         // An even number of chunks of nearly equal rows (sizes at most one row apart), so
         // that two threads get equal shares: 28^3's 49 rows in chunks of 9 left the last
         // chunk 4 rows and one thread 27 rows against 22. Fixed by the geometry alone, not the
@@ -382,6 +401,8 @@ struct ForwardPass<'a, T> {
 struct ForwardScratch<T> {
     v: Vec<T>,
     m: Vec<T>,
+    /// A position's `V^T`, for the weight gradient's products (grown as they need it).
+    vt: Vec<T>,
     bufs: RowBuffers<T>,
 }
 
@@ -391,6 +412,7 @@ impl<T> Default for ForwardScratch<T> {
         Self {
             v: Vec::new(),
             m: Vec::new(),
+            vt: Vec::new(),
             bufs: RowBuffers {
                 a: Vec::new(),
                 b: Vec::new(),
@@ -404,7 +426,7 @@ fn scratch_for<T: Element>(plan: &Plan, c_in: usize, c_out: usize) -> Pooled<For
     let (p, most) = (plan.positions, matrix_stride(plan.chunk_cols()));
     let mut scratch = Pooled::<ForwardScratch<T>>::take();
     let rows = RowBuffers::<T>::len(plan);
-    let ForwardScratch { v, m, bufs } = &mut *scratch;
+    let ForwardScratch { v, m, bufs, .. } = &mut *scratch;
     at_least(v, p * c_in * most);
     at_least(m, p * c_out * most);
     at_least(&mut bufs.a, rows);
@@ -426,7 +448,7 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     let in_vox: usize = g.input.iter().product();
     let out = g.output();
     let out_vox: usize = out.iter().product();
-    let ForwardScratch { v, m, bufs } = scratch;
+    let ForwardScratch { v, m, bufs, .. } = scratch;
     let (half, cols) = (plan.row_cols(), rows * plan.row_cols());
     let ld = matrix_stride(cols);
     let x_n = &pass.x[n * ci * in_vox..];
@@ -564,7 +586,7 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
     let in_vox: usize = g.input.iter().product();
     let out_vox: usize = g.output().iter().product();
-    let ForwardScratch { v, m: z, bufs } = scratch;
+    let ForwardScratch { v, m: z, vt, bufs } = scratch;
     let cols = rows * plan.row_cols();
     let ld = matrix_stride(cols);
     let x_n = &pass.x[n * ci * in_vox..];
@@ -586,12 +608,12 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
         // those of V add nothing; the padding to `ld` is not read. Without `first` the products
         // are added to values an earlier chunk wrote.
         unsafe {
-            matmul(
-                (co, ci, cols),
-                (du.add(pos * co * ci), ci as isize, 1),
-                (z[pos * co * ld..].as_ptr(), ld as isize, 1),
-                (v[pos * ci * ld..].as_ptr(), 1, ld as isize),
-                !first,
+            weight_product(
+                (co, ci, cols, ld),
+                (du.add(pos * co * ci), !first),
+                z[pos * co * ld..].as_ptr(),
+                v[pos * ci * ld..].as_ptr(),
+                vt,
             )
         };
     }
@@ -823,15 +845,21 @@ mod tests {
 
     #[test]
     fn passes_split_into_several_chunks_match_im2col() {
-        // 256 rows of tiles per batch item, 3 -> 5 channels: at most 110 rows a chunk, so three
-        // chunks, made four (an even number) of 64 rows.
+        // 256 rows of tiles per batch item, 3 -> 5 channels: with `gemm`'s chunk target at most
+        // 110 rows a chunk, so three chunks, made four (an even number) of 64 rows; with our
+        // own products' a quarter of that, so ten of 25 or 26 rows.
         let g = Geometry {
             input: [62, 61, 37],
             ..geometries()[0]
         };
         let plan = Plan::new(&g, 4);
         let rows: Vec<usize> = plan.chunks(1).iter().map(|&(_, _, rows)| rows).collect();
-        assert_eq!(rows, [64; 4], "{plan:?}");
+        let expected = if chunk_target() == CHUNK_TARGET_ELEMS {
+            vec![64; 4]
+        } else {
+            (0..10).map(|i| (i + 1) * 256 / 10 - i * 256 / 10).collect()
+        };
+        assert_eq!(rows, expected, "{plan:?}");
         assert_passes_match_im2col(&g, Tile::F4, 14);
     }
 
