@@ -17,6 +17,7 @@ pub(crate) trait Element:
     const ZERO: Self;
     const ONE: Self;
     /// Whether this is `f32`, for kernels with an f32-only build (a pointer cast then keeps the type).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     const IS_F32: bool;
 
     fn to_f64(self) -> f64;

@@ -95,16 +95,17 @@ pub(crate) fn leaky_grad(
 }
 
 /// `len` values made [`CHUNK`] at a time in parallel: `fill(start, dst)` writes the values
-/// `start..start + dst.len()`. Plain loops over slices, which the compiler vectorises: rayon's
-/// zipped `map` + `collect` wrote one value per call through its consumer (6% of a 54^2 critic
-/// step's samples on an AVX2 machine).
-fn map_chunks<T: Element>(
+/// `start..start + dst.len()`. Plain loops over slices, like the other element-wise kernels:
+/// rayon's zipped `map` + `collect` wrote one value per call through its consumer.
+///
+/// # Safety
+/// `fill` must write every value of the chunk it is given.
+unsafe fn map_chunks<T: Element>(
     len: usize,
     fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync,
 ) -> Vec<T> {
     let mut out = unwritten(len);
-    // SAFETY: `fill` writes every value of its chunk (both callers zip the chunk with inputs
-    // at least as long).
+    // SAFETY: the caller's promise.
     unsafe { extend_par_chunks(&mut out, len, CHUNK, |i, dst| fill(i * CHUNK, dst)) };
     out
 }
@@ -114,11 +115,14 @@ struct Leaky(f64);
 impl Kernel for Leaky {
     fn run<T: Element>(&self, x: &[T], _: &[T]) -> candle_core::Result<Vec<T>> {
         let slope = T::from_f64(self.0);
-        Ok(map_chunks(x.len(), |start, dst| {
-            for (d, &v) in dst.iter_mut().zip(&x[start..]) {
-                d.write(v * slope_at(v, slope));
-            }
-        }))
+        // SAFETY: each chunk is zipped with the input from its start on, as long as the output.
+        Ok(unsafe {
+            map_chunks(x.len(), |start, dst| {
+                for (d, &v) in dst.iter_mut().zip(&x[start..]) {
+                    d.write(v * slope_at(v, slope));
+                }
+            })
+        })
     }
 }
 
@@ -145,11 +149,21 @@ struct LeakyGrad(f64);
 impl Kernel for LeakyGrad {
     fn run<T: Element>(&self, grad: &[T], y: &[T]) -> candle_core::Result<Vec<T>> {
         let slope = T::from_f64(self.0);
-        Ok(map_chunks(grad.len(), |start, dst| {
-            for ((d, &g), &y) in dst.iter_mut().zip(&grad[start..]).zip(&y[start..]) {
-                d.write(g * slope_at(y, slope));
-            }
-        }))
+        if grad.len() != y.len() {
+            candle_core::bail!(
+                "leaky-relu-grad: {} gradients for {} outputs",
+                grad.len(),
+                y.len()
+            );
+        }
+        // SAFETY: each chunk is zipped with both inputs from its start on, as long as the output.
+        Ok(unsafe {
+            map_chunks(grad.len(), |start, dst| {
+                for ((d, &g), &y) in dst.iter_mut().zip(&grad[start..]).zip(&y[start..]) {
+                    d.write(g * slope_at(y, slope));
+                }
+            })
+        })
     }
 }
 

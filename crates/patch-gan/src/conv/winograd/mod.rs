@@ -8,8 +8,8 @@
 //! outputs with 216 products instead of 1728 (8x fewer), and 3.4 transformed values per output
 //! instead of 8. The products are, for each transformed position, one matrix product
 //! `C_out x C_in` by `C_in x tiles` (plus one unused column per row of tiles, see
-//! `Plan::row_cols`), which `gemm` runs at full speed. All three passes of a
-//! convolution use it:
+//! `Plan::row_cols`), which `products` runs at full speed (on a kernel of its own or `gemm`'s).
+//! All three passes of a convolution use it:
 //!
 //! - forward: input tiles transformed by `B^T`, weights by `G`, products by `A^T`;
 //! - input gradient: the forward pass of the transposed convolution (kernel flipped, channels
@@ -24,7 +24,8 @@
 //! cache in transformed inputs and products (streamed through once; see `chunk_target`).
 //!
 //! The 1D transforms and the weights' transform are in `minimal`, the row-wise maps and the
-//! split of rows into phases in `rows`; this module tiles a convolution and runs its passes.
+//! split of rows into phases in `rows`, the matrix products in `products`; this module tiles a
+//! convolution and runs its passes.
 
 use gemm::Parallelism;
 use rayon::prelude::*;
@@ -51,12 +52,14 @@ use rows::{deinterleave, interleave, map_d_then_h, map_into};
 /// row count instead, 2^21 had left 28^3 three chunks for two threads.
 const CHUNK_TARGET_ELEMS: usize = 1 << 21;
 
-/// [`CHUNK_TARGET_ELEMS`] with our own products (`products`, AVX2 without AVX-512): 2 MiB of
-/// f32. Those read their right operand in place, a panel at a time, where `gemm` packs it: a
-/// chunk whose matrices stay nearer the core pays. Measured on a Zen 3 machine (512 KiB of L2
-/// per core), 2 threads, `gan_step` medians of 3 alternated runs: the 108^2 critic 0.143 s at
-/// 2^21, 0.111-0.125 s at 2^20, 2^19 and 2^18; 40^3 0.278 s at 2^21, 0.223 s at 2^19, 0.260 s
-/// at 2^18; 28^3 and the 54^2 critic 2-6% faster at 2^19.
+/// [`CHUNK_TARGET_ELEMS`] on CPUs that run our own products (`products`, AVX2 without AVX-512):
+/// 2 MiB of f32. Those read their right operand in place, a panel at a time, where `gemm` packs
+/// it: a chunk whose matrices stay nearer the core pays. (The passes such CPUs still leave to
+/// `gemm`, f64 and weight gradients of input channels not a multiple of 8, take it too,
+/// unmeasured.) Measured on a Zen 3 machine (512 KiB of L2 per core), 2 threads, `gan_step`
+/// medians of 3 alternated runs in two sets: the 108^2 critic 0.135-0.143 s at 2^21, 0.111 at
+/// 2^20, 0.102-0.125 at 2^19, 0.119 at 2^18; 40^3 0.238-0.278 s at 2^21, 0.214 at 2^20,
+/// 0.204-0.223 at 2^19, 0.260 at 2^18; 28^3 and the 54^2 critic 2-6% faster at 2^19.
 const CHUNK_TARGET_ELEMS_OWN_PRODUCTS: usize = 1 << 19;
 
 /// The chunk target of this CPU: the chunks, and so the weight gradient's partial sums, depend
@@ -73,7 +76,7 @@ fn chunk_target() -> usize {
 /// an operand whose rows are a whole number of its 16-lane vectors where it lies, and copies
 /// (packs) any other first: with the padding, the forward products read the transformed
 /// inputs in place and run no partial-width kernels (the padded columns' products are never
-/// read). Measured, one thread, three runs alternated: a 40^3 generator step 2-3% faster, 28^3
+/// read). Our own kernels (`products`) need a multiple of 8 only; the same stride serves both. Measured, one thread, three runs alternated: a 40^3 generator step 2-3% faster, 28^3
 /// and the 54^2 critic unchanged.
 fn matrix_stride(cols: usize) -> usize {
     cols.next_multiple_of(16)
@@ -603,7 +606,7 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
     );
     let du = du.spare_capacity_mut().as_mut_ptr().cast::<T>();
     for pos in 0..p {
-        // SAFETY: dU[pos] is co x ci, Z[pos] co x cols, V[pos]^T cols x ci (rows `ld` apart),
+        // SAFETY: dU[pos] is co x ci, Z[pos] co x cols and V[pos] ci x cols (rows `ld` apart),
         // all in bounds (`du` has room for p x co x ci). The unused columns of Z are zeros, so
         // those of V add nothing; the padding to `ld` is not read. Without `first` the products
         // are added to values an earlier chunk wrote.

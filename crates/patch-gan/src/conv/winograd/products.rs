@@ -4,10 +4,11 @@
 //!
 //! - forward (and input gradient): `M = U V`, `U` a `C_out x C_in` block of transformed
 //!   weights, `V` a `C_in x cols` block of transformed inputs;
-//! - weight gradient: `dU (+)= Z V^T`, `Z` a `C_out x cols` block of expanded output gradients.
+//! - weight gradient: `dU (+)= Z V^T`, `Z` a `C_out x cols` block of expanded output gradients
+//!   (on `gemm` also where `C_in` is not a multiple of 8).
 //!
 //! The matrices are small (32 x 32 by 32 x 150-200 in the generators and critics, one product
-//! per position, 36 or 216 positions per chunk) and there are thousands per step: `gemm`'s set-up
+//! per transformed position, 36 or 216 positions with F(4, 3)) and there are thousands per step: `gemm`'s set-up
 //! per call (its thread-local workspace, packing into panels, tails for the 32 rows its 6-row
 //! kernel does not divide) was 8% of a 54^2 critic step's samples on an AVX2 machine, and its
 //! weight-gradient products ran at half the rate of its forward ones in a 40^3 generator step.
@@ -86,8 +87,9 @@ pub(super) unsafe fn weight_product<T: Element>(
             avx2::product(product)
         };
     }
-    let _ = transposed; // the AVX2 branch's only
-                        // SAFETY: forwarded from the caller.
+    // The scratch is the AVX2 branch's only.
+    let _ = transposed;
+    // SAFETY: forwarded from the caller.
     unsafe {
         matmul(
             (rows, inner, cols),
@@ -164,7 +166,7 @@ mod avx2 {
             unsafe { column_block::<WIDE_ROWS, WIDE>(p, col) };
             col += WIDE * LANES;
         }
-        // The last 8 to 40 columns (`cols` is a multiple of 8): blocks of 16, then one of 8.
+        // The last 0 to 40 columns (`cols` is a multiple of 8): blocks of 16, then one of 8.
         while col + 2 * LANES <= cols {
             unsafe { column_block::<NARROW_ROWS, 2>(p, col) };
             col += 2 * LANES;
@@ -239,7 +241,7 @@ mod avx2 {
     /// value at a time.
     ///
     /// # Safety
-    /// The CPU must have AVX2, and the pointers must cover the matrices.
+    /// The CPU must have AVX2 and FMA, and the pointers must cover the matrices.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn transpose(
         (src, stride): (*const f32, usize),
@@ -268,9 +270,13 @@ mod avx2 {
 
     /// The transpose of 8 rows of 8 values: pairs interleaved, then pairs of pairs, then the
     /// 128-bit halves.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA. (An `unsafe fn`, whose body may call the intrinsics on
+    /// Rust 1.85, the workspace's oldest: safe functions with target features need 1.86.)
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn transpose_8x8(r: [__m256; LANES]) -> [__m256; LANES] {
+    unsafe fn transpose_8x8(r: [__m256; LANES]) -> [__m256; LANES] {
         let t = [
             _mm256_unpacklo_ps(r[0], r[1]),
             _mm256_unpackhi_ps(r[0], r[1]),
