@@ -314,18 +314,11 @@ mod avx2 {
 mod tests {
     use super::*;
 
-    /// Values in [-1, 1) from a fixed linear congruential sequence.
+    /// The Winograd tests' values in [-1, 1), as f32.
     fn values(len: usize, seed: u64) -> Vec<f32> {
-        let mut state = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (0..len)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
+        super::super::tests::values(len, seed)
+            .into_iter()
+            .map(|v| v as f32)
             .collect()
     }
 
