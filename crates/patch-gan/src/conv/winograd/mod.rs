@@ -27,7 +27,6 @@
 //! split of rows into phases in `rows`, the matrix products in `products`; this module tiles a
 //! convolution and runs its passes.
 
-use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::cpu::{Geometry, SharedMut};
@@ -345,45 +344,6 @@ fn expand_output_grads<T: Element, W: Minimal<M, N>, const M: usize, const N: us
         let srcs = std::array::from_fn(|p| &bufs.a[row * width + p * cols..]);
         let at = std::array::from_fn(|xi| ((row * N + xi) * c_out + c) * ld);
         map_into(srcs, z, at, cols, W::output_adjoint);
-    }
-}
-
-/// `dst (m x n) = lhs (m x k) * rhs (k x n)` (or `+=` with `accumulate`), with the row and
-/// column strides given as `(row, col)`.
-///
-/// # Safety
-/// The pointers must cover the matrices their strides and sizes imply.
-#[allow(clippy::too_many_arguments)]
-unsafe fn matmul<T: Element>(
-    (m, n, k): (usize, usize, usize),
-    dst: (*mut T, isize, isize),
-    lhs: (*const T, isize, isize),
-    rhs: (*const T, isize, isize),
-    accumulate: bool,
-) {
-    // SAFETY: forwarded from the caller.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst.0,
-            dst.2,
-            dst.1,
-            accumulate,
-            lhs.0,
-            lhs.2,
-            lhs.1,
-            rhs.0,
-            rhs.2,
-            rhs.1,
-            if accumulate { T::ONE } else { T::ZERO },
-            T::ONE,
-            false,
-            false,
-            false,
-            Parallelism::None,
-        )
     }
 }
 

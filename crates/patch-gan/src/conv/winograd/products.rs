@@ -18,7 +18,8 @@
 //! (`C_in x cols` values against `C_out x C_in x cols` products), so that its products are of
 //! the same kind.
 
-use super::matmul;
+use gemm::Parallelism;
+
 use crate::element::Element;
 
 /// `m (rows x ld) = u (rows x inner) * v (inner x ld)`, all row-major, `m` and `v` with rows
@@ -101,6 +102,45 @@ pub(super) unsafe fn weight_product<T: Element>(
     }
 }
 
+/// `dst (m x n) = lhs (m x k) * rhs (k x n)` (or `+=` with `accumulate`) on `gemm`, for f64 and
+/// the CPUs the kernels below do not run on; row and column strides given as `(row, col)`.
+///
+/// # Safety
+/// The pointers must cover the matrices their strides and sizes imply.
+#[allow(clippy::too_many_arguments)]
+unsafe fn matmul<T: Element>(
+    (m, n, k): (usize, usize, usize),
+    dst: (*mut T, isize, isize),
+    lhs: (*const T, isize, isize),
+    rhs: (*const T, isize, isize),
+    accumulate: bool,
+) {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.0,
+            dst.2,
+            dst.1,
+            accumulate,
+            lhs.0,
+            lhs.2,
+            lhs.1,
+            rhs.0,
+            rhs.2,
+            rhs.1,
+            if accumulate { T::ONE } else { T::ZERO },
+            T::ONE,
+            false,
+            false,
+            false,
+            Parallelism::None,
+        )
+    }
+}
+
 /// Whether this CPU runs the f32 kernels of this module: AVX2 and FMA (the two flags are
 /// separate), and no AVX-512, where `gemm`'s 16-lane kernels are the faster ones.
 pub(super) fn own_kernels() -> bool {
@@ -132,8 +172,9 @@ mod avx2 {
     /// The main blocks of `m`: 2 rows by 6 vectors (48 columns), 12 accumulators, which with
     /// the 2 broadcasts and the loaded vector take 15 of the 16 registers and keep both FMA
     /// units busy (an accumulator waits 4 cycles between its FMAs; 12 chains cover 2 x 4).
-    /// Measured alone on a Zen 3 core, 32 x 32 by 32 x 192: 76-77 GFLOP/s, as 3 x 4; 4 x 2
-    /// 70-71; 4 x 3 and 6 x 2 spill accumulators (37-46); `gemm` 66-68.
+    /// Measured alone on a Zen 3 core, 32 x 32 by 32 x 192 (a timing loop in a throwaway test,
+    /// not kept): 76-77 GFLOP/s, as 3 x 4; 4 x 2 70-71; 4 x 3 and 6 x 2 spill accumulators
+    /// (37-46); `gemm` 66-68.
     const WIDE_ROWS: usize = 2;
     const WIDE: usize = 6;
 
