@@ -75,8 +75,9 @@ fn chunk_target() -> usize {
 /// an operand whose rows are a whole number of its 16-lane vectors where it lies, and copies
 /// (packs) any other first: with the padding, the forward products read the transformed
 /// inputs in place and run no partial-width kernels (the padded columns' products are never
-/// read). Our own kernels (`products`) need a multiple of 8 only; the same stride serves both. Measured, one thread, three runs alternated: a 40^3 generator step 2-3% faster, 28^3
-/// and the 54^2 critic unchanged.
+/// read). Measured, one thread, three runs alternated: a 40^3 generator step 2-3% faster, 28^3
+/// and the 54^2 critic unchanged. Our own kernels (`products`) need a multiple of 8 only; the
+/// same stride serves both.
 fn matrix_stride(cols: usize) -> usize {
     cols.next_multiple_of(16)
 }
