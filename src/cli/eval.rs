@@ -10,18 +10,15 @@ use super::model_io::load_model;
 use super::train::{device, load_dataset};
 use anyhow::{ensure, Context, Result};
 use candle_core::{Device, Tensor};
-use radiance_volume::{Activation, RadianceVolume};
 use rand::SeedableRng;
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
 use singrav::dataset::{Dataset, DepthKind};
-use singrav::fit::{view_psnr, FitConfig};
 use singrav::metrics::{
     colour_swd_per_scene, depth_rmse, diversity_mv, floaters_per_scene, mean_psnr, mean_ssim,
     patch_swd_per_scene, sifid_mv, Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE,
 };
 use singrav::SinGrav;
-use volrender::DensityInterpolation;
 
 /// Arguments of `volgen eval`.
 #[derive(Debug, clap::Args)]
@@ -235,10 +232,9 @@ fn evaluate(
         })
         .transpose()?;
     // In the scene's coordinates, with the density rule the run renders by.
-    let v_star_volume = model.to_rendered(&v_star)?;
-    let training_volume_psnr = volume_psnr(&model, &v_star_volume, &scene_dataset, &training)?;
+    let training_volume_psnr = model.volume_psnr(&v_star, &scene_dataset, &training)?;
     let held_out_volume_psnr = (!held_out.is_empty())
-        .then(|| volume_psnr(&model, &v_star_volume, &scene_dataset, &held_out))
+        .then(|| model.volume_psnr(&v_star, &scene_dataset, &held_out))
         .transpose()?;
 
     let all: Vec<usize> = (0..dataset.len()).collect();
@@ -331,34 +327,6 @@ fn fit(
         ssim: mean_ssim(&maps.rgb, &real)?,
         depth_rmse: depth_rmse(&maps.depth, &coarse.depths)?,
     })
-}
-
-/// The mean colour PSNR of `volume` rendered by its density rule (as
-/// [`SinGrav::to_rendered`] gives them) from every view `frames` of `dataset` at the dataset's
-/// resolution, as `volgen fit` reports its volumes (the same renderer and sampling), on the
-/// model's background.
-fn volume_psnr(
-    model: &SinGrav,
-    (volume, density): &(RadianceVolume, DensityInterpolation),
-    dataset: &Dataset,
-    frames: &[usize],
-) -> Result<f64> {
-    let defaults = FitConfig::default();
-    let activation = match density.post_activation() {
-        Some([scale, shift]) => Activation::default()
-            .with_density_scale(scale)
-            .with_density_shift(shift),
-        None => defaults.activation,
-    };
-    let config = FitConfig {
-        background: model.config().background,
-        colour_interpolation: model.config().colour_interpolation(),
-        post_activation: density.post_activation().is_some(),
-        activation,
-        ..defaults
-    };
-    let per_view = view_psnr(volume, dataset, frames, &config)?;
-    Ok(per_view.iter().sum::<f64>() / per_view.len() as f64)
 }
 
 /// `count` of `indices` evenly spaced (all of them when there are fewer).

@@ -42,7 +42,9 @@ pub struct TrainOptions {
     /// Preset: paper (GPU), small, tiny (about six minutes on 2 cores) or micro (seconds).
     #[arg(long, default_value = "tiny")]
     pub preset: String,
-    /// Continue a killed run from its last checkpoint.
+    /// Continue a killed run from its last checkpoint (with the same settings; a run whose
+    /// reconstruction is not fitted yet may change --reconstruction-fit, so a finished run can
+    /// be given that fit).
     #[arg(long)]
     pub resume: bool,
     /// Ablation: the number of scales N (keeps the coarsest N - 1 3D scales).
@@ -119,6 +121,11 @@ pub struct TrainOptions {
     /// The 3D critic also judges opacity-weighted colour per voxel, not only opacity.
     #[arg(long, requires = "lambda_volume_critic")]
     pub volume_critic_colour: bool,
+    /// After the last scale, fit the reconstruction V* directly to the views for K steps, every
+    /// network frozen, and keep the difference as V*'s detail (0: none; default: the
+    /// preset's). Generated scenes are not changed by it.
+    #[arg(long, value_name = "K")]
+    pub reconstruction_fit: Option<usize>,
     /// Concurrent training (ConSinGAN): while a 3D scale trains, the generators of the K - 1
     /// scales below it train too, on the same losses (default 1: the paper's training, coarser
     /// scales frozen).
@@ -202,6 +209,9 @@ impl TrainOptions {
             config.lambda_volume_critic = weight;
         }
         config.volume_critic_colour |= self.volume_critic_colour;
+        if let Some(steps) = self.reconstruction_fit {
+            config.reconstruction_fit_steps = steps;
+        }
         if let Some(scales) = self.concurrent_scales {
             config.concurrent = Some(Concurrent {
                 scales,
@@ -404,21 +414,27 @@ pub fn train_with_progress(
                 format_losses(&p.losses)
             )),
             Event::Checkpoint(_) => {}
-            Event::ScaleDone(picture) => {
-                let line = format!(
+            Event::ScaleDone(picture) => print_line(
+                &bar,
+                format!(
                     "scale {}/{} done in {:.0} s; samples: {}",
                     p.scale,
                     p.scales,
                     p.scale_seconds,
                     picture.display()
-                );
-                // Without a terminal the bar is hidden; the per-scale lines still matter.
-                if bar.is_hidden() {
-                    eprintln!("{line}");
-                } else {
-                    bar.println(line);
-                }
-            }
+                ),
+            ),
+            Event::ReconstructionFitting => bar.set_message(format!(
+                "fitting the reconstruction to the views ({} steps)",
+                config.reconstruction_fit_steps
+            )),
+            Event::ReconstructionFitted { batch_psnr } => print_line(
+                &bar,
+                format!(
+                    "reconstruction fitted to the views in {:.0} s (last batch {batch_psnr:.2} dB)",
+                    p.scale_seconds
+                ),
+            ),
         }
         Control::Continue
     };
@@ -428,6 +444,16 @@ pub fn train_with_progress(
     match outcome {
         TrainOutcome::Finished(model) => Ok(model),
         TrainOutcome::Stopped => anyhow::bail!("training stopped before the last scale"),
+    }
+}
+
+/// Prints a line above the progress bar (or on stderr when the bar is hidden, without a
+/// terminal: the per-scale lines still matter there).
+fn print_line(bar: &ProgressBar, line: String) {
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        bar.println(line);
     }
 }
 
@@ -541,6 +567,21 @@ mod tests {
             .config();
         let message = format!("{:#}", zero.unwrap_err());
         assert!(message.contains("concurrent"), "{message}");
+    }
+
+    #[test]
+    fn the_reconstruction_fit_is_the_presets_unless_given() {
+        let preset = TrainConfig::preset("tiny")
+            .unwrap()
+            .reconstruction_fit_steps;
+        assert_eq!(
+            config(&["--preset", "tiny"]).reconstruction_fit_steps,
+            preset
+        );
+        let given = config(&["--preset", "tiny", "--reconstruction-fit", "500"]);
+        assert_eq!(given.reconstruction_fit_steps, 500);
+        let off = config(&["--preset", "tiny", "--reconstruction-fit", "0"]);
+        assert_eq!(off.reconstruction_fit_steps, 0);
     }
 
     #[test]

@@ -55,7 +55,8 @@ pub struct Checkpoint {
     /// Where it stands.
     pub state: TrainState,
     /// Weights (`g{n}.*`, `up.*`, `d.*`), `z_star` (and the optimised `z_star.{n}` of runs with
-    /// `reconstruction_noise_lr > 0`) and optimiser moments (`opt_g.*`, `opt_d.*`, `opt_z.*`).
+    /// `reconstruction_noise_lr > 0`), optimiser moments (`opt_g.*`, `opt_d.*`, `opt_z.*`), and
+    /// V*'s `reconstruction_detail` once a run with `reconstruction_fit_steps > 0` has fitted it.
     pub tensors: HashMap<String, Tensor>,
 }
 

@@ -203,6 +203,16 @@ pub struct TrainConfig {
     /// use it. 0 (SinGAN's training, and runs made before it existed): the last step's weights.
     #[serde(default)]
     pub generator_average: f64,
+    /// Steps of a direct fit of the finished reconstruction to the training views
+    /// ([`crate::fit::fit_volume_from`], at the finest 3D scale's grid, with the fit's rates and
+    /// ray batches but training's reconstruction loss and renderer), run after the last scale
+    /// with every network frozen. The difference is
+    /// kept as [`SinGrav::reconstruction_detail`](crate::SinGrav::reconstruction_detail), which
+    /// [`SinGrav::reconstruct`](crate::SinGrav::reconstruct) adds to V*: the reconstruction
+    /// gets a direct fit's per-voxel freedom while generated scenes stay exactly what the
+    /// generators make. 0 (the paper's V*, and runs made before it existed): no such fit.
+    #[serde(default)]
+    pub reconstruction_fit_steps: usize,
     /// SinGAN's factor between a scale's reconstruction error and its noise amplitude (0.1).
     pub noise_amp_factor: f64,
     /// Noise amplitude at the coarsest scale (1).
@@ -576,6 +586,7 @@ impl TrainConfig {
             reconstruction_noise_final_lr: None,
             reconstruction_noise_from: 0.0,
             generator_average: 0.0,
+            reconstruction_fit_steps: 0,
             sparse_from_scale: Some(SPARSE_FROM_SCALE),
             sparse_threshold: SPARSE_THRESHOLD,
             sparse_margin: SPARSE_MARGIN,
@@ -1209,6 +1220,7 @@ mod tests {
             "reconstruction_noise_final_lr",
             "reconstruction_noise_from",
             "generator_average",
+            "reconstruction_fit_steps",
             "lambda_opacity_binary",
             "opacity_binary_until_scale",
             "lambda_opacity_distribution",
@@ -1233,6 +1245,7 @@ mod tests {
         assert_eq!(old.reconstruction_noise_final_lr, None);
         assert_eq!(old.reconstruction_noise_from, 0.0);
         assert_eq!(old.generator_average, 0.0);
+        assert_eq!(old.reconstruction_fit_steps, 0);
         assert_eq!(old.lambda_opacity_binary, 0.0);
         assert_eq!(old.opacity_binary_until_scale, None);
         assert_eq!(old.lambda_opacity_distribution, 0.0);

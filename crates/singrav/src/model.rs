@@ -34,8 +34,14 @@ pub struct SinGrav {
     /// The reconstruction noise z*_n of the 3D scales n >= 2 built so far (index n - 2), when
     /// the configuration optimises it (`reconstruction_noise_lr > 0`); zeros otherwise.
     fine_z_star: Vec<Var>,
+    /// Added to the finest 3D scale's reconstruction once training has fitted it to the views
+    /// ([`TrainConfig::reconstruction_fit_steps`]): `(1, 4, s, s, s)` raw values.
+    reconstruction_detail: Option<Tensor>,
     csg: Option<Tensor>,
 }
+
+/// Checkpoint name of [`SinGrav::reconstruction_detail`].
+pub const RECONSTRUCTION_DETAIL_TENSOR: &str = "reconstruction_detail";
 
 /// Names of a VarMap's trainable variables (BatchNorm running statistics excluded), sorted so
 /// optimisers and checkpoints see them in a fixed order.
@@ -157,6 +163,7 @@ impl SinGrav {
             noise_amps: Vec::new(),
             z_star,
             fine_z_star: Vec::new(),
+            reconstruction_detail: None,
             csg,
         })
     }
@@ -230,6 +237,8 @@ impl SinGrav {
         }
         self.generators.push((generator, map.clone()));
         self.noise_amps.push(amp);
+        // A detail belongs to the scale that was finest when it was fitted.
+        self.reconstruction_detail = None;
         Ok(map)
     }
 
@@ -302,6 +311,41 @@ impl SinGrav {
             noise.push(z);
         }
         Ok(noise)
+    }
+
+    /// What training's fit of the reconstruction to the views added to the finest 3D scale's
+    /// V* ([`TrainConfig::reconstruction_fit_steps`]), if it ran: raw values `(1, 4, s, s, s)`.
+    /// [`SinGrav::reconstruct`] includes it; generated scenes never see it.
+    pub fn reconstruction_detail(&self) -> Option<&Tensor> {
+        self.reconstruction_detail.as_ref()
+    }
+
+    /// Sets the detail [`SinGrav::reconstruct`] adds to the finest 3D scale's reconstruction.
+    ///
+    /// Errors unless `detail` has that scale's raw shape `(1, 4, s, s, s)`, and while no 3D
+    /// scale is built.
+    pub fn set_reconstruction_detail(&mut self, detail: Tensor) -> Result<()> {
+        let scales = self.volume_scales();
+        let Some(&s) = self.config.volume_sizes.get(scales.wrapping_sub(1)) else {
+            return Err(invalid("reconstruction detail", "no 3D scale is built"));
+        };
+        let expected = [1, VOLUME_CHANNELS, s, s, s];
+        if detail.dims() != expected {
+            return Err(invalid(
+                "reconstruction detail",
+                format!(
+                    "expected shape {expected:?} (3D scale {scales}), got {:?}",
+                    detail.dims()
+                ),
+            ));
+        }
+        self.reconstruction_detail = Some(
+            detail
+                .to_device(&self.device)?
+                .to_dtype(DType::F32)?
+                .detach(),
+        );
+        Ok(())
     }
 
     /// Runs the 3D generators 1..=noise.len() and returns the raw volume `(1, 4, s, s, s)` of
@@ -386,7 +430,8 @@ impl SinGrav {
     }
 
     /// Every generator's and the upsampler's trainable tensors, named `g{n}.{var}` and
-    /// `up.{var}`, plus `z_star`.
+    /// `up.{var}`, plus `z_star`, the optimised `z_star.{n}` and the fitted
+    /// `reconstruction_detail` where the model has them.
     pub fn tensors(&self) -> HashMap<String, Tensor> {
         let mut out = HashMap::new();
         for (i, (_, map)) in self.generators.iter().enumerate() {
@@ -402,6 +447,9 @@ impl SinGrav {
         out.insert("z_star".into(), self.z_star.clone());
         for (i, z) in self.fine_z_star.iter().enumerate() {
             out.insert(format!("z_star.{}", i + 2), z.as_tensor().clone());
+        }
+        if let Some(detail) = &self.reconstruction_detail {
+            out.insert(RECONSTRUCTION_DETAIL_TENSOR.into(), detail.clone());
         }
         out
     }
@@ -440,6 +488,12 @@ impl SinGrav {
         if upsampler {
             let map = model.push_upsampler(&mut rng).map_err(|e| e.to_string())?;
             load_into(&map, tensors, "up.", device)?;
+        }
+        if let Some(detail) = tensors.get(RECONSTRUCTION_DETAIL_TENSOR) {
+            let detail = detail.to_device(device).map_err(|e| e.to_string())?;
+            model
+                .set_reconstruction_detail(detail)
+                .map_err(|e| format!("tensor `{RECONSTRUCTION_DETAIL_TENSOR}`: {e}"))?;
         }
         Ok(model)
     }

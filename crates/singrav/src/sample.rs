@@ -6,11 +6,13 @@ use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use glam::Vec3;
-use radiance_volume::{Aabb, RadianceVolume};
+use radiance_volume::{Aabb, Activation, RadianceVolume};
 use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
 
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::fit::{view_psnr, FitConfig};
 use crate::model::SinGrav;
 use crate::render::{ViewMaps, ViewRenderer};
 
@@ -192,6 +194,40 @@ impl SinGrav {
         Ok((RadianceVolume::new(volume, aabb)?, density))
     }
 
+    /// The mean colour PSNR (dB) of a raw volume `(1, 4, s, s, s)` rendered by its density rule
+    /// ([`SinGrav::to_rendered`], in the scene's coordinates) from every view `frames` of
+    /// `dataset` (in the scene's coordinates too) at the dataset's resolution, as `volgen fit`
+    /// reports its volumes (the fit's renderer and sampling) on the model's background: what
+    /// `volgen eval` reports as V*'s `volume_psnr`, comparable with a direct fit's PSNR.
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let data = singrav::dataset::Dataset::load("data/stones".as_ref(), model.config().background)?;
+    /// let all: Vec<usize> = (0..data.len()).collect();
+    /// println!("V*'s volume: {:.2} dB", model.volume_psnr(&model.reconstruct()?, &data, &all)?);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn volume_psnr(&self, raw: &Tensor, dataset: &Dataset, frames: &[usize]) -> Result<f64> {
+        let (volume, density) = self.to_rendered(raw)?;
+        let defaults = FitConfig::default();
+        let activation = match density.post_activation() {
+            Some([scale, shift]) => Activation::default()
+                .with_density_scale(scale)
+                .with_density_shift(shift),
+            None => defaults.activation,
+        };
+        let config = FitConfig {
+            background: self.config().background,
+            colour_interpolation: self.config().colour_interpolation(),
+            post_activation: density.post_activation().is_some(),
+            activation,
+            ..defaults
+        };
+        let per_view = view_psnr(&volume, dataset, frames, &config)?;
+        Ok(per_view.iter().sum::<f64>() / per_view.len().max(1) as f64)
+    }
+
     /// The physical volume of a raw volume `(1, 4, s, s, s)` on a grid `factor` (odd) times
     /// finer per axis, for renderers that interpolate physical density (Blender, OpenVDB
     /// tools, volrender's `DensityInterpolation::Physical`): every fine voxel holds what the
@@ -253,7 +289,9 @@ impl SinGrav {
 
     /// The fixed-noise reconstruction V*: the raw volume `(1, 4, s, s, s)` of the finest 3D
     /// scale built from the reconstruction noise ({z*_1, 0, ..., 0}, or with optimised finer
-    /// noise {z*_1, z*_2, ...}; detached), the volume training fits to the dataset's views.
+    /// noise {z*_1, z*_2, ...}; detached), the volume training fits to the dataset's views,
+    /// plus the detail of training's final fit to the views when it ran
+    /// ([`SinGrav::reconstruction_detail`]).
     ///
     /// ```no_run
     /// # let device = candle_core::Device::Cpu;
@@ -264,7 +302,11 @@ impl SinGrav {
     /// ```
     pub fn reconstruct(&self) -> Result<Tensor> {
         let noise = self.reconstruction_noise(self.volume_scales())?;
-        Ok(self.generate(&noise)?.detach())
+        let volume = self.generate(&noise)?.detach();
+        match self.reconstruction_detail() {
+            Some(detail) => Ok((volume + detail)?),
+            None => Ok(volume),
+        }
     }
 
     /// The renderer of the finest 3D scale, depth in world units.

@@ -10,6 +10,7 @@ use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::config::Concurrent;
 use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
 use singrav::fit::{fit_volume, FitConfig};
+use singrav::model::RECONSTRUCTION_DETAIL_TENSOR;
 use singrav::scenes::StandingStones;
 use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
 use singrav::{Error, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
@@ -1255,4 +1256,103 @@ fn a_generator_weight_average_is_what_a_scale_keeps_and_resumes() {
         let message = config.validate().unwrap_err().to_string();
         assert!(message.contains("generator_average"), "{message}");
     }
+}
+
+/// The colour PSNR of `model`'s reconstruction rendered from every view of `data`, as `volgen
+/// eval` scores V*'s volume.
+fn reconstruction_volume_psnr(model: &SinGrav, data: &Dataset) -> f64 {
+    let all: Vec<usize> = (0..data.len()).collect();
+    let v_star = model.reconstruct().unwrap();
+    model.volume_psnr(&v_star, data, &all).unwrap()
+}
+
+/// A finished run resumed with `reconstruction_fit_steps` fits its reconstruction to the views
+/// with every network frozen: V*'s volume comes nearer the views, every other tensor (and so
+/// every generated scene) stays bit for bit, the detail is saved and loads with the run, and
+/// a fitted run refuses another step count naming the field.
+#[test]
+fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let plain_dir = tmp.path().join("plain");
+    let (plain, _) = run_to_end(&micro(), &data, &plain_dir);
+    let fitted_dir = tmp.path().join("fitted");
+    std::fs::create_dir(&fitted_dir).unwrap();
+    std::fs::copy(
+        plain_dir.join(CHECKPOINT_FILE),
+        fitted_dir.join(CHECKPOINT_FILE),
+    )
+    .unwrap();
+    let config = TrainConfig {
+        reconstruction_fit_steps: 60,
+        ..micro()
+    };
+    let mut fit_events = 0;
+    let mut observer = |p: &Progress| {
+        if let Event::ReconstructionFitted { batch_psnr } = p.event {
+            assert!(batch_psnr.is_finite() && p.scale_seconds > 0.0);
+            fit_events += 1;
+        }
+        Control::Continue
+    };
+    let outcome = train(
+        &config,
+        &data,
+        &fitted_dir,
+        &resume(),
+        &Device::Cpu,
+        &mut observer,
+    );
+    let TrainOutcome::Finished(fitted) = outcome.unwrap() else {
+        panic!("nobody asked to stop")
+    };
+    assert_eq!(fit_events, 1);
+
+    let before = reconstruction_volume_psnr(&plain, &data);
+    let after = reconstruction_volume_psnr(&fitted, &data);
+    println!("V*'s volume: {before:.2} dB trained, {after:.2} dB fitted after training");
+    assert!(after > before + 1.0, "{after:.2} vs {before:.2} dB");
+
+    let mut saved = checkpoint_tensors(&fitted_dir);
+    let detail = saved.remove(RECONSTRUCTION_DETAIL_TENSOR).unwrap();
+    let s = *micro().volume_sizes.last().unwrap();
+    assert_eq!(detail.dims(), &[1, 4, s, s, s]);
+    assert_same_tensors(&saved, &checkpoint_tensors(&plain_dir));
+    let scene = |model: &SinGrav| -> Vec<f32> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let raw = model.generate_random(&mut rng).unwrap();
+        raw.flatten_all().unwrap().to_vec1().unwrap()
+    };
+    assert_eq!(scene(&plain), scene(&fitted));
+    let (loaded, _) = SinGrav::load(&fitted_dir, &Device::Cpu).unwrap();
+    let values = |t: Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
+    assert_eq!(
+        values(loaded.reconstruct().unwrap()),
+        values(fitted.reconstruct().unwrap())
+    );
+
+    // A run with the fit from the start ends where the finished run given it later does.
+    let direct = tmp.path().join("direct");
+    run_to_end(&config, &data, &direct);
+    assert_same_tensors(
+        &checkpoint_tensors(&direct),
+        &checkpoint_tensors(&fitted_dir),
+    );
+
+    let other = TrainConfig {
+        reconstruction_fit_steps: 30,
+        ..micro()
+    };
+    let err = train_error(&other, &data, &fitted_dir, &resume());
+    assert!(err.contains("reconstruction_fit_steps"), "{err}");
+    let wrong = Tensor::zeros((1, 4, 3, 3, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
+    let mut model = loaded;
+    let err = model
+        .set_reconstruction_detail(wrong)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("reconstruction detail") && err.contains(&format!("{s}, {s}, {s}]")),
+        "{err}"
+    );
 }

@@ -81,14 +81,16 @@ impl FitGrid {
     }
 
     /// The same grid, rendered with per-sample activation of its density or not.
-    fn post_activated(self, post_activated: bool) -> Self {
+    pub(super) fn post_activated(self, post_activated: bool) -> Self {
         Self {
             post_activated,
             ..self
         }
     }
 
-    fn from_raw(size: usize, raw: Vec<f32>, activation: Activation) -> Self {
+    /// A grid of edge `size` holding the raw values `raw` (planar `(4, s, s, s)`), fresh Adam
+    /// moments, every voxel live.
+    pub(super) fn from_raw(size: usize, raw: Vec<f32>, activation: Activation) -> Self {
         let voxels = size * size * size;
         Self {
             size,
@@ -101,6 +103,11 @@ impl FitGrid {
             activation,
             post_activated: false,
         }
+    }
+
+    /// The raw values, planar `(4, s, s, s)`, without the grid's optimiser state.
+    pub(super) fn into_raw(self) -> Vec<f32> {
+        self.raw
     }
 
     /// The grid's edge in voxels.

@@ -86,8 +86,9 @@ pub struct FitConfig {
     pub lambda_opacity: f32,
     /// Total variation weights.
     pub regularisers: Regularisers,
-    /// Samples per voxel crossed (the renderer's `PerVoxel` sampler at the current size).
-    pub samples_per_voxel: usize,
+    /// Where rays are sampled: 2 per voxel crossed (the renderer's `PerVoxel`) by default;
+    /// `Uniform` as SinGRAV's training renders, where a fit must match what the model renders.
+    pub sampler: Sampler,
     /// Density everywhere at the start, per world length.
     pub initial_sigma: f32,
     /// Opacity across one voxel below which a voxel (and no neighbour) counts as empty.
@@ -133,7 +134,7 @@ impl Default for FitConfig {
                 tv_density: 0.0,
                 tv_colour: 0.0,
             },
-            samples_per_voxel: 2,
+            sampler: Sampler::PerVoxel { per_voxel: 2 },
             initial_sigma: 0.1,
             occupancy_threshold: 1e-3,
             occupancy_every: 50,
@@ -217,9 +218,13 @@ impl FitConfig {
                 "finite and >= 0",
             ),
             (
-                self.samples_per_voxel > 0,
-                "samples_per_voxel",
-                "at least 1",
+                match self.sampler {
+                    Sampler::PerVoxel { per_voxel: n }
+                    | Sampler::Uniform { samples: n }
+                    | Sampler::UniformLeft { samples: n } => n > 0,
+                },
+                "sampler",
+                "at least 1 sample",
             ),
             (
                 self.initial_sigma > 0.0 && self.initial_sigma.is_finite(),
@@ -249,9 +254,7 @@ impl FitConfig {
     /// The renderer a fit (and its evaluation) uses at grid edge `size`.
     fn render_config(&self) -> RenderConfig {
         RenderConfig::default()
-            .with_sampler(Sampler::PerVoxel {
-                per_voxel: self.samples_per_voxel,
-            })
+            .with_sampler(self.sampler)
             .with_skip_empty(true)
             .with_background(self.background)
             .with_aabb(self.aabb)
@@ -318,6 +321,10 @@ pub struct FittedVolume {
     /// render: `volume` itself, or with [`FitConfig::post_activation`] the same with raw
     /// density in channel 0.
     pub rendered: RadianceVolume,
+    /// The raw values `(4, s, s, s)` the fit optimised, under the config's activation (what
+    /// [`fit_volume_from`] starts from). Voxels the occupancy mask killed keep their last raw
+    /// values here, where `volume` and `rendered` hold them empty.
+    pub raw: Tensor,
     /// Steps taken.
     pub steps: usize,
     /// Wall-clock seconds of the fit.
@@ -337,16 +344,89 @@ pub fn fit_volume(
     observer: &mut dyn FnMut(&FitProgress),
 ) -> Result<FittedVolume> {
     config.validate()?;
-    let views = dataset.subset(training)?;
-    let level = views.level(views.width(), views.height(), &Device::Cpu)?;
-    let bank = RayBank::from_level(&level)?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
-    let mut grid = FitGrid::new(
+    let grid = FitGrid::new(
         config.size_at(0.0),
         config.activation,
         config.initial_sigma,
         config.post_activation,
     )?;
+    run_fit(dataset, training, config, grid, observer)
+}
+
+/// Continues a fit from the raw values `initial` `(4, s, s, s)` (raw density and colour under
+/// the config's activation, as a SinGRAV pyramid's raw volume holds them), with `s` the
+/// config's `size`: the grid does not grow, and the config's budget, rates, losses and
+/// occupancy mask apply as in [`fit_volume`]. With `occupancy_every` 0 every voxel stays live,
+/// so [`FittedVolume::raw`] renders exactly as the fit rendered.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
+/// use singrav::fit::{fit_volume_from, FitBudget, FitConfig};
+/// let dir = tempfile::tempdir()?;
+/// let spec = DatasetSpec { views: 4, resolution: 12, grid: 12, seed: 1 };
+/// write_dataset(&singrav::scenes::StandingStones::new(1), dir.path(), &spec)?;
+/// let data = Dataset::load(dir.path(), [1.0; 3])?;
+/// let config = FitConfig { size: 8, budget: FitBudget::Steps(20), rays_per_step: 256, occupancy_every: 0, ..FitConfig::default() };
+/// let start = Tensor::zeros((4, 8, 8, 8), candle_core::DType::F32, &Device::Cpu)?;
+/// let fitted = fit_volume_from(&data, &[0, 1, 2, 3], &config, &start, &mut |_| {})?;
+/// assert_eq!(fitted.raw.dims(), &[4, 8, 8, 8]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// Errors as [`fit_volume`] does, and on a start of another shape.
+pub fn fit_volume_from(
+    dataset: &Dataset,
+    training: &[usize],
+    config: &FitConfig,
+    initial: &Tensor,
+    observer: &mut dyn FnMut(&FitProgress),
+) -> Result<FittedVolume> {
+    // The start is the final grid: no growth, whatever the config's start size says.
+    let config = FitConfig {
+        start_size: config.size,
+        ..config.clone()
+    };
+    config.validate()?;
+    let s = config.size;
+    if initial.dims() != [CHANNELS, s, s, s] {
+        return Err(invalid(
+            "initial volume",
+            format!(
+                "expected raw values of shape [{CHANNELS}, {s}, {s}, {s}] (the fit's size), got {:?}",
+                initial.dims()
+            ),
+        ));
+    }
+    let raw: Vec<f32> = initial
+        .flatten_all()?
+        .to_dtype(candle_core::DType::F32)?
+        .to_vec1()?;
+    if let Some(bad) = raw.iter().position(|v| !v.is_finite()) {
+        return Err(invalid(
+            "initial volume",
+            format!(
+                "expected finite raw values, found {} at index {bad}",
+                raw[bad]
+            ),
+        ));
+    }
+    let grid = FitGrid::from_raw(s, raw, config.activation).post_activated(config.post_activation);
+    run_fit(dataset, training, &config, grid, observer)
+}
+
+/// The fit's loop from `grid` on: ray batches, losses, Adam steps, growth and occupancy.
+fn run_fit(
+    dataset: &Dataset,
+    training: &[usize],
+    config: &FitConfig,
+    mut grid: FitGrid,
+    observer: &mut dyn FnMut(&FitProgress),
+) -> Result<FittedVolume> {
+    let views = dataset.subset(training)?;
+    let level = views.level(views.width(), views.height(), &Device::Cpu)?;
+    let bank = RayBank::from_level(&level)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
     let render_config = config
         .render_config()
         .with_depth(config.use_depth && config.lambda_depth > 0.0)
@@ -431,9 +511,10 @@ pub fn fit_volume(
     Ok(FittedVolume {
         volume,
         rendered,
+        live_fraction: grid.live_fraction(),
         steps: step,
         seconds: start.elapsed().as_secs_f64(),
-        live_fraction: grid.live_fraction(),
+        raw: Tensor::from_vec(grid.into_raw(), (CHANNELS, size, size, size), &Device::Cpu)?,
     })
 }
 

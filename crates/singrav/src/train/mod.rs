@@ -10,6 +10,7 @@ mod final_scale;
 mod fitted;
 mod height_profile;
 mod log;
+mod reconstruction_fit;
 mod run;
 mod sample_opacity;
 mod texture;
@@ -131,6 +132,16 @@ pub enum Event {
     Checkpoint(PathBuf),
     /// A scale finished; its picture of samples is at the path.
     ScaleDone(PathBuf),
+    /// The fit of the finished reconstruction to the views
+    /// ([`crate::TrainConfig::reconstruction_fit_steps`]) starts.
+    ReconstructionFitting,
+    /// The finished reconstruction was fitted to the views
+    /// ([`crate::TrainConfig::reconstruction_fit_steps`]); the progress's `scale_seconds` is the
+    /// fit's time, `batch_psnr` its last ray batch's colour PSNR in dB.
+    ReconstructionFitted {
+        /// The last step's batch PSNR (dB).
+        batch_psnr: f64,
+    },
 }
 
 /// Progress reported to the observer.

@@ -12,6 +12,7 @@ use super::critic::{Critic, VolumeCritic};
 use super::final_scale::FinalScale;
 use super::fitted::load_fitted;
 use super::log::LossLog;
+use super::reconstruction_fit::fit_reconstruction;
 use super::texture::load_vgg19;
 use super::volume_scale::{picture_path, reconstruction_rmse, VolumeScale};
 use super::{Control, Event, Progress, RunOptions, StepLosses};
@@ -20,7 +21,7 @@ use crate::config::TrainConfig;
 use crate::dataset::Dataset;
 use crate::error::{invalid, Error, Result};
 use crate::fit::{fit_volume, FitConfig};
-use crate::model::{load_into, var_tensors, SinGrav};
+use crate::model::{load_into, var_tensors, SinGrav, RECONSTRUCTION_DETAIL_TENSOR};
 use crate::noise::step_rng;
 use crate::optim::{Adam, WeightAverage};
 use crate::render::ViewRenderer;
@@ -127,8 +128,11 @@ const SETUP_STREAM: usize = usize::MAX;
 const PICTURE_STREAM: usize = usize::MAX - 1;
 
 /// Trains SinGRAV on `dataset` (without its held-out views when `config.holdout` says so),
-/// writing checkpoints, the loss log, `config.json` and pictures into `run_dir`. With `options.resume`, continues from `run_dir`'s checkpoint (which must have
-/// been made with the same configuration) and ends with the same weights as an uninterrupted
+/// writing checkpoints, the loss log, `config.json` and pictures into `run_dir`, then fits the
+/// reconstruction to the views when `config.reconstruction_fit_steps` asks for it. With
+/// `options.resume`, continues from `run_dir`'s checkpoint (which must have been made with the
+/// same configuration, but for `reconstruction_fit_steps` while that fit has not run: a finished
+/// run can be given it later) and ends with the same weights as an uninterrupted
 /// run. Without it, refuses a directory that already holds a checkpoint rather than overwrite
 /// it. VGG-19 weights the configuration needs (`options.vgg19_weights`) are loaded before
 /// anything is written, so a missing or broken file fails at once with [`Error::Weights`].
@@ -178,9 +182,15 @@ pub fn train(
     let fitted = fitted.map(|(volume, _)| volume);
     // A run killed before its first checkpoint has nothing to resume: it starts over.
     let resume = options.resume && checkpoint_file.exists();
+    let mut resumed_config = None;
     let (mut model, mut state, saved) = if resume {
         let checkpoint = Checkpoint::load(&checkpoint_file, device)?;
-        check_same_config(&checkpoint.config, config, &checkpoint_file)?;
+        check_same_config(
+            &resumable_config(&checkpoint, config),
+            config,
+            &checkpoint_file,
+        )?;
+        resumed_config = Some(checkpoint.config.clone());
         let model = SinGrav::from_tensors(
             config,
             &checkpoint.tensors,
@@ -368,6 +378,37 @@ pub fn train(
         if observer(&progress) == Control::Stop {
             return Ok(TrainOutcome::Stopped);
         }
+    }
+    // After the last scale's checkpoint, so a run killed during the fit resumes into it.
+    let last = config.scales();
+    let iterations = config.scale_schedule(last).iterations;
+    let mut progress = Progress {
+        scale: last,
+        scales: last,
+        iteration: iterations,
+        iterations,
+        losses: StepLosses::default(),
+        scale_seconds: 0.0,
+        total_seconds: total_seconds(&state),
+        event: Event::ReconstructionFitting,
+    };
+    if config.reconstruction_fit_steps > 0 && model.reconstruction_detail().is_none() {
+        if observer(&progress) == Control::Stop {
+            return Ok(TrainOutcome::Stopped);
+        }
+        let fit = fit_reconstruction(&mut model, config, dataset, state.depth_norm)?;
+        save_boundary(&checkpoint_file, config, &state, &model, &previous_critics)?;
+        progress.scale_seconds = fit.seconds;
+        progress.event = Event::ReconstructionFitted {
+            batch_psnr: fit.batch_psnr,
+        };
+        if observer(&progress) == Control::Stop {
+            return Ok(TrainOutcome::Stopped);
+        }
+    } else if resumed_config.is_some_and(|saved| saved != *config) {
+        // A finished run resumed with another `reconstruction_fit_steps` and nothing to fit:
+        // the checkpoint records the configuration `config.json` now shows.
+        save_boundary(&checkpoint_file, config, &state, &model, &previous_critics)?;
     }
     Ok(TrainOutcome::Finished(Box::new(model)))
 }
@@ -628,6 +669,23 @@ fn restore_stage(
             .map_err(fail)?;
     }
     Ok(())
+}
+
+/// The configuration a resume must match: the checkpoint's, except that a run whose
+/// reconstruction was not fitted to the views yet may be given any `reconstruction_fit_steps`
+/// (the fit runs after every scale, so it can be added to a finished run, or dropped).
+fn resumable_config(checkpoint: &Checkpoint, wanted: &TrainConfig) -> TrainConfig {
+    if checkpoint
+        .tensors
+        .contains_key(RECONSTRUCTION_DETAIL_TENSOR)
+    {
+        checkpoint.config.clone()
+    } else {
+        TrainConfig {
+            reconstruction_fit_steps: wanted.reconstruction_fit_steps,
+            ..checkpoint.config.clone()
+        }
+    }
 }
 
 /// Errors unless a checkpoint's configuration equals the requested one, naming the fields that
