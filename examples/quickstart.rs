@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use glam::Vec3;
-use singrav::scenes::{Scene, StandingStones};
+use rgbd_dataset::scenes::{Scene, StandingStones};
 use volgen::prelude::*;
 use volrender::{render_image, Camera, RenderConfig, Sampler};
 

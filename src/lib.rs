@@ -11,6 +11,9 @@
 //! | [`embed`] | `csg-embed` | Cartesian spatial grid and Fourier encodings |
 //! | [`gan`] | `patch-gan` | Conv3d, generators, patch discriminators, WGAN-GP |
 //! | [`swd`] | `swd-loss` | sliced Wasserstein distance and texture losses |
+//! | [`dataset`] | `rgbd-dataset` | RGB-D datasets (load, write, resize, bounds) and built-in scenes |
+//! | [`metrics`] | `scene-metrics` | Diversity-MV, SIFID-MV, PSNR, SSIM, patch and colour SWD, floaters |
+//! | [`fit`] | `volume-fit` | a direct fit of one radiance volume to a dataset |
 //! | [`singrav`] | `singrav` | the SinGRAV model |
 //!
 //! ```
@@ -23,9 +26,12 @@
 pub use csg_embed as embed;
 pub use patch_gan as gan;
 pub use radiance_volume as volume;
+pub use rgbd_dataset as dataset;
+pub use scene_metrics as metrics;
 pub use singrav;
 pub use swd_loss as swd;
 pub use volrender as render;
+pub use volume_fit as fit;
 
 /// The types most users need.
 pub mod prelude {

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
-use singrav::metrics::InceptionBlock1;
+use scene_metrics::InceptionBlock1;
 
 mod common;
 use common::{failure, ok, path, train_micro, volgen};
@@ -68,7 +68,7 @@ fn rendered_psnr_by_hand(
     data: &Path,
 ) -> f64 {
     use volrender::{render, Rays, RenderConfig, Sampler};
-    let dataset = singrav::dataset::Dataset::load(data, [1.0; 3]).unwrap();
+    let dataset = rgbd_dataset::Dataset::load(data, [1.0; 3]).unwrap();
     let level = dataset
         .level(dataset.width(), dataset.height(), &Device::Cpu)
         .unwrap();
@@ -130,6 +130,10 @@ fn eval_reports_diversity_and_with_weights_sifid() {
         "3",
         "--views",
         "2",
+        // V* as the layout reference: a fit of the views per evaluation would take a minute
+        // here; the fit is checked once below.
+        "--layout-reference",
+        "vstar",
     ];
 
     let text = ok(&volgen(&base));
@@ -233,6 +237,29 @@ fn eval_reports_diversity_and_with_weights_sifid() {
     let err = failure(&volgen(&args));
     assert!(err.contains("nowhere.safetensors"), "{err}");
 
+    // Against V* no fit is made, and V*'s own distance is not reported; against a fit (the
+    // default) it is.
+    assert!(text.contains("against V*"), "{text}");
+    assert_eq!(report["layout_reference"], "vstar");
+    assert!(
+        report["reconstruction_layout_distance"].is_null(),
+        "{report}"
+    );
+    assert!(number_after(&text, "layout_distance:") > 0.0, "{text}");
+    let fitted = ok(&volgen(&base[..base.len() - 2]));
+    assert!(
+        fitted.contains("a direct fit of the training views"),
+        "{fitted}"
+    );
+    let report = json(&run.join("eval.json"));
+    assert_eq!(report["layout_reference"], "fit");
+    let v_star = report["reconstruction_layout_distance"].as_f64().unwrap();
+    assert!(v_star >= 0.0 && v_star.is_finite(), "{report}");
+    let mut args = base[..base.len() - 2].to_vec();
+    args.extend(["--layout-reference", "baked"]);
+    let err = failure(&volgen(&args));
+    assert!(err.contains("fit or vstar"), "{err}");
+
     let err = failure(&volgen(&["eval", path(&run)]));
     assert!(err.contains("--dataset"), "{err}");
     let err = failure(&volgen(&[
@@ -251,6 +278,7 @@ fn small_eval<'a>(runs: &[&'a Path], data: &'a Path) -> Vec<&'a str> {
     let mut args = vec!["eval"];
     args.extend(runs.iter().map(|run| path(run)));
     args.extend(["--dataset", path(data), "--scenes", "2", "--views", "2"]);
+    args.extend(["--layout-reference", "vstar"]);
     args
 }
 
@@ -262,7 +290,7 @@ fn a_post_activated_run_scores_its_volume_as_it_renders() {
     let tmp = tempfile::tempdir().unwrap();
     let data = common::stones_dataset(tmp.path());
     let run = tmp.path().join("post");
-    common::train_micro_with(&data, &run, &["--set", "post_activation=true"]);
+    common::train_micro_with(&data, &run, &["--set", "rendering.post_activation=true"]);
     ok(&volgen(&small_eval(&[&run], &data)));
     let volume_psnr = json(&run.join("eval.json"))["volume_psnr"]
         .as_f64()
@@ -328,7 +356,7 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
         "2",
     ]));
     assert!(text.contains("trained model"), "{text}");
-    assert_eq!(json(&held.join("config.json"))["holdout"], 3);
+    assert_eq!(json(&held.join("config.json"))["run"]["holdout"], 3);
 
     // Both runs in one evaluation, with `extra` flags.
     let eval_both = |extra: &[&str]| {
@@ -365,12 +393,12 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
             .collect()
     };
     let (plain, holdout) = (cells(lines[2]), cells(lines[3]));
-    assert_eq!(plain.len(), 12, "{text}");
+    assert_eq!(plain.len(), 13, "{text}");
     assert_eq!(plain[0], path(&run));
     assert_eq!(holdout[0], path(&held));
     // No held-out views and no SIFID-MV in the plain run: dashes.
     assert_eq!(
-        (plain[5].as_str(), plain[6].as_str(), plain[11].as_str()),
+        (plain[5].as_str(), plain[6].as_str(), plain[12].as_str()),
         ("-", "-", "-")
     );
     assert_eq!(holdout[5], format!("{held_psnr:.2}"));
@@ -381,7 +409,13 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     // Two scenes leave too few for Diversity-MV's jackknife: its value alone.
     assert!(report["diversity_mv_stderr"].is_null(), "{report}");
     let diversity = report["diversity_mv"].as_f64().unwrap();
-    assert_eq!(holdout[10], format!("{diversity:.4}"));
+    assert_eq!(holdout[11], format!("{diversity:.4}"));
+    // The layout distance, with its standard error.
+    assert_eq!(report["layout_reference"], "vstar");
+    let layout = report["layout_distance"].as_f64().unwrap();
+    let layout_error = report["layout_distance_stderr"].as_f64().unwrap();
+    assert!(layout > 0.0 && layout.is_finite(), "{report}");
+    assert_eq!(holdout[10], format!("{layout:.4} ± {layout_error:.4}"));
     // V*'s volume over the 4 training and, separately, the 2 held-out frames.
     let volume_psnr = report["volume_psnr"].as_f64().unwrap();
     assert_eq!(holdout[4], format!("{volume_psnr:.2}"));

@@ -27,7 +27,7 @@ fn train_command(data: &Path, run: &Path) -> Command {
         "--preset",
         "micro",
         "--set",
-        "checkpoint_iterations=1",
+        "run.checkpoint_iterations=1",
     ]);
     if run.is_dir() {
         command.arg("--resume");

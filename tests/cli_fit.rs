@@ -120,7 +120,7 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     );
     let config: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
-    assert_eq!(config["lambda_fitted"], 5.0);
+    assert_eq!(config["losses"]["fitted"], 5.0);
     assert!(run.join("fitted.safetensors").is_file());
     let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
     let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
@@ -154,7 +154,13 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     // A post-activated run compares raw density, which resampling a finer grid would average:
     // its fit is the finest scale's own grid, and the log has the 3D term.
     let run5 = tmp.path().join("run5");
-    let post = ["--fit", "--fit-steps", "5", "--set", "post_activation=true"];
+    let post = [
+        "--fit",
+        "--fit-steps",
+        "5",
+        "--set",
+        "rendering.post_activation=true",
+    ];
     train_micro_with(&data, &run5, &post);
     let fitted = RadianceVolume::load_safetensors(run5.join("fitted.safetensors")).unwrap();
     assert_eq!(fitted.dims().xyz(), [11, 11, 11], "micro's finest 11^3");
@@ -176,8 +182,8 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     train_micro_with(&data, &run3, &args);
     let config: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run3.join("config.json")).unwrap()).unwrap();
-    assert_eq!(config["lambda_volume_critic"], 0.5);
-    assert_eq!(config["volume_critic_colour"], false);
+    assert_eq!(config["losses"]["volume_critic"], 0.5);
+    assert_eq!(config["critics"]["volume_colour"], false);
     let log = std::fs::read_to_string(run3.join("log.jsonl")).unwrap();
     let lines: Vec<serde_json::Value> = log
         .lines()
@@ -188,7 +194,7 @@ fn fit_writes_the_volume_its_views_and_a_psnr_report() {
     // A configuration that compares with a fitted volume and is given none fits one first,
     // as `tiny` does.
     let run4 = tmp.path().join("run4");
-    train_micro_with(&data, &run4, &["--set", "lambda_fitted=2"]);
+    train_micro_with(&data, &run4, &["--set", "losses.fitted=2"]);
     let fitted = RadianceVolume::load_safetensors(run4.join("fitted.safetensors")).unwrap();
     assert_eq!(fitted.dims().xyz(), [22, 22, 22]);
 }

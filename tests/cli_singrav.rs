@@ -308,7 +308,7 @@ fn bounds_are_recorded_and_samples_land_in_the_scene() {
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
     assert_eq!(
-        config["bounds"]["min"],
+        config["run"]["bounds"]["min"],
         serde_json::json!([-1.5, -1.5, -2.0])
     );
     let samples = tmp.path().join("samples");
@@ -367,7 +367,7 @@ fn scene_writes_a_loadable_dataset_and_rejects_unknown_names() {
             text.contains("wrote 4 views") && text.contains("transforms.json"),
             "{text}"
         );
-        let data = singrav::dataset::Dataset::load(&dir, [1.0; 3]).unwrap();
+        let data = rgbd_dataset::Dataset::load(&dir, [1.0; 3]).unwrap();
         assert_eq!((data.len(), data.width(), data.height()), (4, 16, 16));
     }
     let bad = volgen(&["scene", "volcano", "--out", path(tmp.path())]);

@@ -11,7 +11,7 @@ use arbitrary::Arbitrary;
 use candle_core::Device;
 use image::{DynamicImage, ImageBuffer, ImageFormat};
 use libfuzzer_sys::fuzz_target;
-use singrav::dataset::{Dataset, LoadOptions};
+use rgbd_dataset::{Dataset, LoadOptions};
 use volgen_fuzz::{all_finite, Damage};
 
 #[derive(Arbitrary, Debug)]

@@ -8,11 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use candle_core::Tensor;
+use rgbd_dataset::scenes::SceneKind;
+use rgbd_dataset::{write_dataset, DatasetSpec};
 use serde::Serialize;
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
-use singrav::dataset::{write_dataset, DatasetSpec};
 use singrav::sample::Sample;
-use singrav::scenes::SceneKind;
 use singrav::train::RunOptions;
 use singrav::SinGrav;
 
@@ -160,7 +160,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     write_overview(&overview, &real, &samples)?;
     let generated: Vec<_> = samples.iter().map(|s| s.views.clone()).collect();
     let diversity_mv = (samples.len() >= 2)
-        .then(|| singrav::metrics::diversity_mv(&generated, &real))
+        .then(|| scene_metrics::diversity_mv(&generated, &real))
         .transpose()?;
 
     let summary = Summary {
@@ -212,7 +212,7 @@ fn write_overview(path: &Path, real: &Tensor, samples: &[Sample]) -> Result<()> 
 /// The first `views` dataset images at the size of the samples' renderings, `(V, 3, H, W)`.
 fn input_views_at_sample_size(
     model: &SinGrav,
-    dataset: &singrav::dataset::Dataset,
+    dataset: &rgbd_dataset::Dataset,
     views: usize,
     samples: &[Sample],
 ) -> Result<Tensor> {

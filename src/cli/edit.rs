@@ -11,8 +11,8 @@ use anyhow::{bail, ensure, Context, Result};
 use glam::Vec3;
 use radiance_volume::Aabb;
 use rand::SeedableRng;
+use rgbd_dataset::SceneBounds;
 use singrav::applications::{empty_voxel, Edit};
-use singrav::dataset::SceneBounds;
 use singrav::sample::showcase_cameras;
 use singrav::SinGrav;
 
@@ -213,7 +213,7 @@ fn generators(from: usize, to: usize) -> String {
 /// Generates the scene, edits it, harmonises it, and writes the three.
 pub fn run(args: &EditArgs) -> Result<()> {
     let model = load_model(&args.model)?;
-    let edits = args.edits(model.config().bounds.as_ref())?;
+    let edits = args.edits(model.config().run.bounds.as_ref())?;
     let harmonize_from = args.harmonize_from(&model)?;
     let cameras = showcase_cameras(args.views, model.render_size())?;
     let write = |stem: &str, raw: &candle_core::Tensor, what: String| -> Result<()> {

@@ -9,16 +9,11 @@ use std::path::{Path, PathBuf};
 use super::model_io::load_model;
 use super::train::{device, load_dataset};
 use anyhow::{ensure, Context, Result};
-use candle_core::{Device, Tensor};
-use rand::SeedableRng;
+use rgbd_dataset::DepthKind;
+use scene_metrics::{Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE};
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
-use singrav::dataset::{Dataset, DepthKind};
-use singrav::metrics::{
-    colour_swd_per_scene, depth_rmse, diversity_mv, floaters_per_scene, mean_psnr, mean_ssim,
-    patch_swd_per_scene, sifid_mv, Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE,
-};
-use singrav::SinGrav;
+use singrav::eval::{evaluate, EvalConfig, Evaluation, LayoutReference};
 
 /// Arguments of `volgen eval`.
 #[derive(Debug, clap::Args)]
@@ -51,6 +46,11 @@ pub struct EvalArgs {
     /// Seed of the noise; the same seed gives the scenes `volgen sample --seed` gives.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// The scene's volume the generated volumes' layout distance is measured against: `fit` (a
+    /// direct fit of the dataset's training views, made first: about 10 s on `tiny`) or
+    /// `vstar` (the model's reconstruction).
+    #[arg(long, value_name = "fit|vstar", default_value = "fit")]
+    layout_reference: LayoutReference,
     /// InceptionV3 weights (torchvision's names, safetensors) for SIFID-MV; without them
     /// SIFID-MV is not computed.
     #[arg(long, value_name = "FILE")]
@@ -66,70 +66,14 @@ pub struct EvalArgs {
     mean: bool,
 }
 
-/// What `eval.json` holds. Infinite PSNRs (exact reconstructions) are written as null.
+/// What `eval.json` holds: the paths, then the library's numbers.
 #[derive(Debug, Serialize)]
-struct Evaluation {
+struct EvalFile {
     model: PathBuf,
     dataset: PathBuf,
-    scenes: usize,
-    seed: u64,
-    /// The dataset frames (their `file_path`) the generated scenes were seen from.
-    views: Vec<String>,
-    /// Edge of the compared colour images in pixels (the model's final size).
-    image_size: usize,
-    /// Edge of the depth and opacity maps (the last 3D scale's rendering size).
-    depth_size: usize,
-    /// The run's `--holdout N`, if it had one.
-    holdout: Option<usize>,
-    /// The training frames the reconstruction was seen from.
-    reconstruction_views: Vec<String>,
-    /// dB, higher is better.
-    reconstruction_psnr: f64,
-    /// 1 is a perfect reconstruction.
-    reconstruction_ssim: f64,
-    /// World units, lower is better.
-    reconstruction_depth_rmse: f64,
-    /// The held-out frames (empty without a holdout).
-    held_out_views: Vec<String>,
-    held_out_psnr: Option<f64>,
-    held_out_ssim: Option<f64>,
-    held_out_depth_rmse: Option<f64>,
-    /// dB: V* itself, the finest 3D scale's volume, rendered from every training view at the
-    /// dataset's resolution as `volgen fit` measures its volumes, by the run's density rule
-    /// (post-activated runs: as `volgen fit --post-activation`), so the two compare on equal
-    /// terms (no upsampler).
-    volume_psnr: f64,
-    /// How many training views `volume_psnr` averages.
-    volume_views: usize,
-    /// The same over every held-out view (null without a holdout).
-    held_out_volume_psnr: Option<f64>,
-    /// Lower is closer to the real views' patch statistics; null for views too small for its
-    /// pyramid.
-    patch_swd_mv: Option<f64>,
-    /// One standard error of `patch_swd_mv` over the generated scenes (as for every
-    /// `_stderr` below: the value's spread over repeated draws of as many scenes).
-    patch_swd_mv_stderr: Option<f64>,
-    /// Lower is closer to the real views' colours.
-    colour_swd: f64,
-    colour_swd_stderr: f64,
-    /// Mean opacity where the real views are empty; null when no real pixel is empty.
-    floaters: Option<f64>,
-    floaters_stderr: Option<f64>,
-    /// Higher is more varied; 0 when every scene is the same.
-    diversity_mv: f64,
-    /// The jackknife standard error over scenes; null with fewer than 3 scenes.
-    diversity_mv_stderr: Option<f64>,
-    /// Lower is closer to the real views' statistics; null without InceptionV3 weights.
-    sifid_mv: Option<f64>,
+    #[serde(flatten)]
+    numbers: Evaluation,
     inception: Option<PathBuf>,
-}
-
-/// How closely V* reproduces a set of real views.
-struct Fit {
-    views: Vec<String>,
-    psnr: f64,
-    ssim: f64,
-    depth_rmse: f64,
 }
 
 /// Evaluates as the arguments say.
@@ -158,7 +102,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .transpose()?;
     let mut evaluations = Vec::with_capacity(args.models.len());
     for model in &args.models {
-        let evaluation = evaluate(model, args, block.as_ref(), &device)
+        let evaluation = evaluate_model(model, args, block.as_ref())
             .with_context(|| format!("evaluating {}", model.display()))?;
         let out = args
             .out
@@ -170,7 +114,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         )
         .with_context(|| format!("writing {}", out.display()))?;
         if args.models.len() == 1 {
-            print_report(&evaluation);
+            print_report(&evaluation.numbers);
         }
         eprintln!("wrote {}", out.display());
         evaluations.push(evaluation);
@@ -181,160 +125,30 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     Ok(())
 }
 
-/// Every number of one model.
-fn evaluate(
+/// Every number of one model, with the paths it came from.
+fn evaluate_model(
     model_path: &Path,
     args: &EvalArgs,
     block: Option<&InceptionBlock1>,
-    device: &Device,
-) -> Result<Evaluation> {
+) -> Result<EvalFile> {
     let model = load_model(model_path)?;
-    let scene_dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
-    // The model renders in its own cube: a run trained with --bounds sees the views there.
-    // Kept apart from the scene's copy only when the two differ.
-    let in_cube = match &model.config().bounds {
-        Some(bounds) => Some(scene_dataset.in_model_cube(bounds)?),
-        None => None,
+    let dataset = load_dataset(&args.dataset, model.config(), args.depth_kind)?;
+    let config = EvalConfig {
+        scenes: args.scenes,
+        views: args.views,
+        seed: args.seed,
+        layout_reference: args.layout_reference,
     };
-    let dataset = in_cube.as_ref().unwrap_or(&scene_dataset);
-    ensure!(
-        args.views <= dataset.len(),
-        "--views {} is more than the {} frames of {}",
-        args.views,
-        dataset.len(),
-        args.dataset.display()
-    );
-    let holdout = model.config().holdout;
-    let (training, held_out) = match holdout {
-        Some(every) => dataset
-            .holdout_split(every)
-            .with_context(|| format!("the run held out every {every}-th view"))?,
-        None => ((0..dataset.len()).collect(), Vec::new()),
-    };
-
-    let v_star = model.reconstruct()?;
-    let reconstruction = fit(
-        &model,
-        &v_star,
-        dataset,
-        &spread(&training, args.views),
-        device,
-    )?;
-    let held = (!held_out.is_empty())
-        .then(|| {
-            fit(
-                &model,
-                &v_star,
-                dataset,
-                &spread(&held_out, args.views),
-                device,
-            )
-        })
-        .transpose()?;
-    // In the scene's coordinates, with the density rule the run renders by.
-    let training_volume_psnr = model.volume_psnr(&v_star, &scene_dataset, &training)?;
-    let held_out_volume_psnr = (!held_out.is_empty())
-        .then(|| model.volume_psnr(&v_star, &scene_dataset, &held_out))
-        .transpose()?;
-
-    let all: Vec<usize> = (0..dataset.len()).collect();
-    let chosen = dataset.subset(&spread(&all, args.views))?;
-    let size = model.render_size();
-    let coarse = chosen.level(size, size, device)?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
-    let mut views: Vec<Tensor> = Vec::with_capacity(args.scenes);
-    let mut opacity: Vec<Tensor> = Vec::with_capacity(args.scenes);
-    for i in 0..args.scenes {
-        // As `SinGrav::sample` draws them: scene i here is scene i of `volgen sample`.
-        let raw = model.generate_random(&mut rng)?;
-        let maps = model.render_maps(&raw, &coarse.cameras)?;
-        views.push(maps.rgb);
-        opacity.push(maps.opacity);
-        eprintln!("scene {}/{} rendered", i + 1, args.scenes);
-    }
-    // The upsampler, when trained, doubles the renderings: compare at the size they came out.
-    let image_size = views[0].dim(3)?;
-    let real = chosen.level(image_size, image_size, device)?.images;
-    let patch_swd = (image_size >= PATCH_SWD_MIN_SIDE)
-        .then(|| Estimate::mean_of(&patch_swd_per_scene(&views, &real)?))
-        .transpose()
-        .context("patch_swd_mv of the generated scenes")?;
-    let colour = Estimate::mean_of(&colour_swd_per_scene(&views, &real)?)
-        .context("colour_swd of the generated scenes")?;
-    let floaters = floaters_per_scene(&opacity, &coarse.opacity)?
-        .map(|per_scene| Estimate::mean_of(&per_scene))
-        .transpose()
-        .context("floaters of the generated scenes")?;
-    // The jackknife computes Diversity-MV over all scenes too; below 3 scenes it has no error.
-    let (diversity, diversity_stderr) = if args.scenes >= 3 {
-        let estimate = Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real))
-            .context("Diversity-MV of the generated scenes")?;
-        (estimate.value, Some(estimate.stderr))
-    } else {
-        (diversity_mv(&views, &real)?, None)
-    };
-
-    Ok(Evaluation {
+    let numbers = evaluate(&model, &dataset, &config, block, &mut |i, n| {
+        eprintln!("scene {i}/{n} rendered")
+    })
+    .with_context(|| format!("with the dataset {}", args.dataset.display()))?;
+    Ok(EvalFile {
         model: model_path.to_path_buf(),
         dataset: args.dataset.clone(),
-        scenes: args.scenes,
-        seed: args.seed,
-        views: chosen.frame_names().to_vec(),
-        image_size,
-        depth_size: size,
-        holdout,
-        reconstruction_views: reconstruction.views,
-        reconstruction_psnr: reconstruction.psnr,
-        reconstruction_ssim: reconstruction.ssim,
-        reconstruction_depth_rmse: reconstruction.depth_rmse,
-        held_out_views: held.as_ref().map(|h| h.views.clone()).unwrap_or_default(),
-        held_out_psnr: held.as_ref().map(|h| h.psnr),
-        held_out_ssim: held.as_ref().map(|h| h.ssim),
-        held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
-        volume_psnr: training_volume_psnr,
-        volume_views: training.len(),
-        held_out_volume_psnr,
-        patch_swd_mv: patch_swd.map(|e| e.value),
-        patch_swd_mv_stderr: patch_swd.map(|e| e.stderr),
-        colour_swd: colour.value,
-        colour_swd_stderr: colour.stderr,
-        floaters: floaters.map(|e| e.value),
-        floaters_stderr: floaters.map(|e| e.stderr),
-        diversity_mv: diversity,
-        diversity_mv_stderr: diversity_stderr,
-        sifid_mv: block.map(|b| sifid_mv(&views, &real, b)).transpose()?,
+        numbers,
         inception: args.inception.clone(),
     })
-}
-
-/// V* against the dataset's `frames`: colour at the final size, depth at the 3D pyramid's.
-fn fit(
-    model: &SinGrav,
-    v_star: &Tensor,
-    dataset: &Dataset,
-    frames: &[usize],
-    device: &Device,
-) -> Result<Fit> {
-    let chosen = dataset.subset(frames)?;
-    let size = model.render_size();
-    let coarse = chosen.level(size, size, device)?;
-    let maps = model.render_maps(v_star, &coarse.cameras)?;
-    let image_size = maps.rgb.dim(3)?;
-    let real = chosen.level(image_size, image_size, device)?.images;
-    Ok(Fit {
-        views: chosen.frame_names().to_vec(),
-        psnr: mean_psnr(&maps.rgb, &real)?,
-        ssim: mean_ssim(&maps.rgb, &real)?,
-        depth_rmse: depth_rmse(&maps.depth, &coarse.depths)?,
-    })
-}
-
-/// `count` of `indices` evenly spaced (all of them when there are fewer).
-fn spread(indices: &[usize], count: usize) -> Vec<usize> {
-    let count = count.min(indices.len());
-    (0..count)
-        .map(|i| indices[i * indices.len() / count])
-        .collect()
 }
 
 /// The labelled lines of one model's numbers.
@@ -402,6 +216,17 @@ fn print_report(e: &Evaluation) {
         None => println!("floaters:                  not computed: no real pixel is empty"),
     }
     println!(
+        "layout_distance:           {}  (lower = matter placed as in the scene; against {})",
+        cell(Some(e.layout_distance), Some(e.layout_distance_stderr), 4),
+        match e.layout_reference.as_str() {
+            "fit" => "a direct fit of the training views",
+            _ => "V*",
+        }
+    );
+    if let Some(v_star) = e.reconstruction_layout_distance {
+        println!("reconstruction_layout:     {v_star:.4}  (V*'s own layout distance from the fit)");
+    }
+    println!(
         "Diversity-MV:              {}  (higher = more varied scenes)",
         cell(Some(e.diversity_mv), e.diversity_mv_stderr, 4)
     );
@@ -425,14 +250,14 @@ fn print_report(e: &Evaluation) {
 /// computed; the sample metrics with their standard errors over scenes. With `mean`, a last row
 /// of each column's mean over the models and its standard error over them ("-" where a model
 /// lacks the number or it is infinite).
-fn markdown_table(evaluations: &[Evaluation], mean: bool) -> String {
+fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
-         patch SWD-MV | colour SWD | floaters | Diversity-MV | SIFID-MV |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         patch SWD-MV | colour SWD | floaters | layout | Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
-        let cells: Vec<String> = columns(e)
+        let cells: Vec<String> = columns(&e.numbers)
             .iter()
             .map(|&(value, stderr, digits)| cell(value, stderr, digits))
             .collect();
@@ -443,7 +268,7 @@ fn markdown_table(evaluations: &[Evaluation], mean: bool) -> String {
         ));
     }
     if mean {
-        let per_model: Vec<_> = evaluations.iter().map(columns).collect();
+        let per_model: Vec<_> = evaluations.iter().map(|e| columns(&e.numbers)).collect();
         let cells: Vec<String> = (0..per_model[0].len())
             .map(|column| {
                 let digits = per_model[0][column].2;
@@ -468,7 +293,7 @@ fn markdown_table(evaluations: &[Evaluation], mean: bool) -> String {
 
 /// The table's numbers of one model, in its column order: value, standard error over scenes
 /// (the sample metrics), decimals shown.
-fn columns(e: &Evaluation) -> [(Option<f64>, Option<f64>, usize); 11] {
+fn columns(e: &Evaluation) -> [(Option<f64>, Option<f64>, usize); 12] {
     [
         (Some(e.reconstruction_psnr), None, 2),
         (Some(e.reconstruction_ssim), None, 4),
@@ -479,6 +304,7 @@ fn columns(e: &Evaluation) -> [(Option<f64>, Option<f64>, usize); 11] {
         (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
         (Some(e.colour_swd), Some(e.colour_swd_stderr), 4),
         (e.floaters, e.floaters_stderr, 4),
+        (Some(e.layout_distance), Some(e.layout_distance_stderr), 4),
         (Some(e.diversity_mv), e.diversity_mv_stderr, 4),
         (e.sifid_mv, None, 4),
     ]

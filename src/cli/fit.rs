@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{ensure, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rgbd_dataset::{Dataset, DepthKind};
 use serde::Serialize;
-use singrav::dataset::{Dataset, DepthKind};
-use singrav::fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, FittedVolume};
 use singrav::TrainConfig;
+use volume_fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, FittedVolume};
 
 use super::export::{write_exr_slices, write_vdb, Encoding};
 use super::model_io::default_upsample;
@@ -67,15 +67,11 @@ pub struct FitArgs {
     /// Fit colour and opacity only, ignoring the dataset's depth.
     #[arg(long)]
     no_depth: bool,
-    /// Render with density-weighted colour (the colours of clear voxels never show), as a
-    /// SinGRAV run trained with `--set density_weighted_colour=true` renders.
-    #[arg(long)]
-    density_weighted_colour: bool,
     /// Render with post-activated density (DVGO's rule: samples activate the interpolated raw
     /// density, so edges can be sharper than a voxel), as a SinGRAV run trained with `--set
-    /// post_activation=true` renders. The files hold physical density per voxel, on a grid
-    /// --upsample times finer.
-    #[arg(long, conflicts_with = "density_weighted_colour")]
+    /// rendering.post_activation=true` renders (as `tiny` does). The files hold physical
+    /// density per voxel, on a grid --upsample times finer.
+    #[arg(long)]
     post_activation: bool,
     /// Write the volume (safetensors, VDB, EXR) on a grid K times finer per axis, K odd, so that
     /// tools interpolating physical density render a post-activated fit as the fit renders it
@@ -209,15 +205,12 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
         start_size: args.start_size.unwrap_or(defaults.start_size),
         budget,
         rays_per_step: args.rays,
-        regularisers: singrav::fit::Regularisers {
+        regularisers: volume_fit::Regularisers {
             tv_density: args.tv_density,
             tv_colour: args.tv_colour,
         },
         use_depth: !args.no_depth,
         seed: args.seed,
-        colour_interpolation: volrender::ColourInterpolation::density_weighted_if(
-            args.density_weighted_colour,
-        ),
         post_activation: args.post_activation,
         ..defaults
     };
@@ -226,10 +219,20 @@ fn fit_config(args: &FitArgs) -> Result<FitConfig> {
 }
 
 /// Fits with a progress bar (step, grid size, batch PSNR, live voxels).
-pub fn fit_with_progress(
+fn fit_with_progress(
     dataset: &Dataset,
     training: &[usize],
     config: &FitConfig,
+) -> Result<FittedVolume> {
+    with_fit_progress(dataset, |observer| {
+        Ok(fit_volume(dataset, training, config, observer)?)
+    })
+}
+
+/// Runs `fit` with a progress bar of the fit's steps (grid size, batch PSNR, live voxels).
+pub fn with_fit_progress(
+    dataset: &Dataset,
+    fit: impl FnOnce(&mut dyn FnMut(&volume_fit::FitProgress)) -> Result<FittedVolume>,
 ) -> Result<FittedVolume> {
     let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -237,7 +240,7 @@ pub fn fit_with_progress(
             .context("progress bar template")?
             .progress_chars("=> "),
     );
-    let fitted = fit_volume(dataset, training, config, &mut |p| {
+    let fitted = fit(&mut |p| {
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!(
             "step {} grid {}^3 batch PSNR {:.2} dB, {:.0}% voxels live",

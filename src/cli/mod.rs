@@ -53,33 +53,10 @@ enum Command {
 
 /// Parses the command line, runs the subcommand and turns errors into a message and exit code 1.
 pub fn run() -> ExitCode {
-    // On a GPU the critics' gradient penalty is candle's double backward, which it supports only
-    // when this is set before the first backward pass; set here, at start-up, before any other
-    // thread exists. On the CPU the penalty is a first-order graph and candle can drop every
-    // backward graph as usual.
-    #[cfg(feature = "cuda")]
-    std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1");
-    // candle's element-wise ops run on its own pool, whose worker spins 25 000 times after each
-    // op before it sleeps; on a machine with as many cores as rayon threads that spin takes a
-    // core from the convolutions that follow (13-19% of a training run's samples were the
-    // spin). Parking at once made `tiny`'s scale-3 iterations 11% faster (docs/training.md).
-    // A value the user set is kept.
-    if std::env::var_os("CANDLE_BARRIER_POOL_SPIN_LIMIT").is_none() {
-        std::env::set_var("CANDLE_BARRIER_POOL_SPIN_LIMIT", "1");
-    }
-    // And that pool runs on the calling thread alone: the work it gets between our own threaded
-    // kernels is gradient bookkeeping (`zeros_like`, `add`) and small ops, where handing each op
-    // to a parked worker (two `futex` calls) cost more than the second core gave back. `tiny`
-    // trained 1.07x faster with it (docs/training.md). This pool only: the convolutions, the
-    // renderer and candle's matmul keep rayon's threads. A value the user set is kept.
-    if std::env::var_os("CANDLE_NUM_THREADS").is_none() {
-        std::env::set_var("CANDLE_NUM_THREADS", "1");
-    }
-    // The parallel loops of training and rendering start on this thread: it is one of rayon's
-    // threads rather than sleeping while they run (see the function). After the variables
-    // above: the pool's threads are the program's first.
-    if let Err(e) = volrender::join_global_pool(None) {
-        eprintln!("error: could not start the worker threads: {e}");
+    // The process-wide speed settings (allocator, candle's pool, rayon's pool with this thread
+    // in it), before any other thread exists.
+    if let Err(e) = singrav::runtime::init(&singrav::runtime::RuntimeOptions::default()) {
+        eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
     let cli = Cli::parse();

@@ -43,7 +43,7 @@ impl Outputs {
     /// The upsampling factor for `model`'s volumes: `--upsample`, or its default.
     pub fn upsample(&self, model: &SinGrav) -> usize {
         self.upsample
-            .unwrap_or_else(|| default_upsample(model.config().post_activation))
+            .unwrap_or_else(|| default_upsample(model.config().rendering.post_activation))
     }
 
     /// The physical volume written for a raw volume `(1, 4, s, s, s)` of `model`, at

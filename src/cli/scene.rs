@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use singrav::dataset::{write_dataset, DatasetSpec};
-use singrav::scenes::SceneKind;
+use rgbd_dataset::scenes::SceneKind;
+use rgbd_dataset::{write_dataset, DatasetSpec};
 
 /// Arguments of `volgen scene`.
 #[derive(Debug, clap::Args)]

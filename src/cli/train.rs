@@ -6,10 +6,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rgbd_dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::checkpoint::CHECKPOINT_FILE;
-use singrav::config::Concurrent;
-use singrav::dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
-use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
+use singrav::train::{
+    train, Control, Event, LossTerm, Progress, RunOptions, StepLosses, TrainOutcome,
+};
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
 
 /// Arguments of `volgen train`.
@@ -65,12 +66,12 @@ pub struct TrainOptions {
     #[arg(long)]
     pub no_depth: bool,
     /// Ablation: train without opacity supervision (the opacity reconstruction term, the
-    /// critics' opacity channel and the samples' opacity terms: height profile, binary prior,
-    /// distribution), as the paper.
+    /// critics' opacity channel and the samples' opacity terms: height profile, binary prior),
+    /// as the paper.
     #[arg(long)]
     pub no_opacity: bool,
     /// The paper's dense finer scales: every voxel may change at every 3D scale (turns off the
-    /// preset's active set, `sparse_from_scale`; see docs/training.md).
+    /// preset's active set, `active_set.from_scale`; see docs/training.md).
     #[arg(long)]
     pub dense: bool,
     /// Weight of the colour-distribution loss of generated scenes at the 3D scales (sliced W2
@@ -103,7 +104,7 @@ pub struct TrainOptions {
     /// Fit a volume to the dataset first (`volgen fit` at twice the finest 3D scale's edge, or
     /// at that edge for post-activated runs; written to RUN/fitted.safetensors) and train
     /// against it as --fitted does. A configuration that compares with a fitted volume (`--set
-    /// lambda_fitted=W`) does this without the flag.
+    /// losses.fitted=W`) does this without the flag.
     #[arg(long)]
     pub fit: bool,
     /// Steps of the fit --fit runs (default: `volgen fit`'s).
@@ -126,27 +127,10 @@ pub struct TrainOptions {
     /// preset's). Generated scenes are not changed by it.
     #[arg(long, value_name = "K")]
     pub reconstruction_fit: Option<usize>,
-    /// Concurrent training (ConSinGAN): while a 3D scale trains, the generators of the K - 1
-    /// scales below it train too, on the same losses (default 1: the paper's training, coarser
-    /// scales frozen).
-    #[arg(long, value_name = "K")]
-    pub concurrent_scales: Option<usize>,
-    /// With --concurrent-scales: the learning rate of a generator k scales below the one
-    /// training is the scale's times F^k.
-    #[arg(long, value_name = "F", default_value_t = DEFAULT_CONCURRENT_RATE_SCALE, requires = "concurrent_scales")]
-    pub concurrent_learning_rate_scale: f64,
-    /// With --concurrent-scales: the coarsest scale that trains on above its own (2 keeps G_1,
-    /// where the scene's layout forms, frozen once trained).
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = 1,
-        requires = "concurrent_scales"
-    )]
-    pub concurrent_first_scale: usize,
-    /// Set any field of the configuration (config.json's names) to a JSON value, after the
-    /// preset and the flags above: `--set lambda_color=50 --set channels=32`. Repeatable.
-    #[arg(long = "set", value_name = "FIELD=VALUE")]
+    /// Set any setting of the configuration, by its dotted path in config.json, to a JSON
+    /// value, after the preset and the flags above: `--set losses.rgb=50 --set
+    /// pyramid.channels=32`. Repeatable.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
     pub settings: Vec<String>,
     /// Keep every N-th view (0, N, 2N, ...) out of training; `volgen eval` reports the
     /// reconstruction on them separately (fit against 3D consistency). Recorded in the run.
@@ -158,9 +142,6 @@ pub struct TrainOptions {
 /// otherwise.
 pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
 
-/// ConSinGAN's learning-rate factor per scale down (its `lr_scale`).
-pub const DEFAULT_CONCURRENT_RATE_SCALE: f64 = 0.1;
-
 impl TrainOptions {
     /// The configuration these options describe.
     pub fn config(&self) -> Result<TrainConfig> {
@@ -171,58 +152,50 @@ impl TrainOptions {
         if let Some(iterations) = self.iterations {
             config = config.with_iterations(iterations);
         }
-        config.use_swd &= !self.no_swd;
+        config.ablations.use_swd &= !self.no_swd;
         if self.vgg19.is_some() {
-            config.swd_features = SwdFeatures::Vgg19;
+            config.losses.swd_features = SwdFeatures::Vgg19;
         }
-        config.use_csg &= !self.no_csg;
-        config.use_depth &= !self.no_depth;
+        config.ablations.use_csg &= !self.no_csg;
+        config.ablations.use_depth &= !self.no_depth;
         if let Some(views) = self.reconstruction_views {
             config = config.with_reconstruction_views(views);
         }
         if self.dense {
-            config.sparse_from_scale = None;
+            config.active_set.from_scale = None;
         }
         if let Some(weight) = self.lambda_colour {
-            config.lambda_colour = weight;
+            config.losses.colour_distribution = weight;
         }
         if let Some(layers) = self.layers {
-            config.layers = layers;
+            config.pyramid.layers = layers;
         }
         if let Some(rate) = self.learning_rate {
-            config.learning_rate = rate;
+            config.schedule.learning_rate = rate;
         }
         if self.no_opacity {
-            config.lambda_opacity = 0.0;
-            config.critic_opacity = false;
-            config.lambda_height_profile = 0.0;
-            config.lambda_opacity_binary = 0.0;
-            config.lambda_opacity_distribution = 0.0;
+            config.losses.opacity = 0.0;
+            config.critics.opacity = false;
+            config.losses.height_profile = 0.0;
+            config.losses.opacity_binary = 0.0;
         }
-        config.seed = self.seed;
+        config.run.seed = self.seed;
         if let Some(weight) = self.lambda_fitted {
-            config.lambda_fitted = weight;
-        } else if (self.fitted.is_some() || self.fit) && config.lambda_fitted == 0.0 {
-            config.lambda_fitted = DEFAULT_LAMBDA_FITTED;
+            config.losses.fitted = weight;
+        } else if (self.fitted.is_some() || self.fit) && config.losses.fitted == 0.0 {
+            config.losses.fitted = DEFAULT_LAMBDA_FITTED;
         }
         if let Some(weight) = self.lambda_volume_critic {
-            config.lambda_volume_critic = weight;
+            config.losses.volume_critic = weight;
         }
-        config.volume_critic_colour |= self.volume_critic_colour;
+        config.critics.volume_colour |= self.volume_critic_colour;
         if let Some(steps) = self.reconstruction_fit {
-            config.reconstruction_fit_steps = steps;
+            config.schedule.reconstruction_fit_steps = steps;
         }
-        if let Some(scales) = self.concurrent_scales {
-            config.concurrent = Some(Concurrent {
-                scales,
-                learning_rate_scale: self.concurrent_learning_rate_scale,
-                first_scale: self.concurrent_first_scale,
-            });
-        }
-        config.holdout = self.holdout;
+        config.run.holdout = self.holdout;
         for setting in &self.settings {
             let (field, value) = setting.split_once('=').with_context(|| {
-                format!("--set {setting}: expected FIELD=VALUE, e.g. --set lambda_color=50")
+                format!("--set {setting}: expected PATH=VALUE, e.g. --set losses.rgb=50")
             })?;
             config = config
                 .with_setting(field.trim(), value.trim())
@@ -241,7 +214,7 @@ impl TrainOptions {
         dataset: &Dataset,
         run_dir: &Path,
     ) -> Result<RunOptions> {
-        let needs_fit = config.lambda_fitted > 0.0 || config.lambda_volume_critic > 0.0;
+        let needs_fit = config.losses.fitted > 0.0 || config.losses.volume_critic > 0.0;
         let fitted_volume = match (&self.fitted, self.fit || needs_fit) {
             (Some(path), _) => Some(path.clone()),
             (None, true) => Some(fit_for_training(
@@ -263,7 +236,7 @@ impl TrainOptions {
 }
 
 /// Fits `dataset`'s training views into `run_dir/fitted.safetensors` as
-/// [`singrav::fit::FitConfig::for_training`] says (with a progress bar), or reuses the file
+/// [`TrainConfig::fit_config`] says (with a progress bar), or reuses the file
 /// there when resuming.
 fn fit_for_training(
     config: &TrainConfig,
@@ -276,18 +249,12 @@ fn fit_for_training(
     if resume && path.exists() {
         return Ok(path);
     }
-    let defaults = singrav::fit::FitConfig::for_training(config);
-    let size = defaults.size;
-    let fit_config = singrav::fit::FitConfig {
-        budget: steps.map_or(defaults.budget, singrav::fit::FitBudget::Steps),
-        ..defaults
-    };
-    // The fit sees only the views training sees, so held-out views stay held out.
-    let training = match config.holdout {
-        Some(every) => dataset.holdout_split(every)?.0,
-        None => (0..dataset.len()).collect(),
-    };
-    let fitted = super::fit::fit_with_progress(dataset, &training, &fit_config)?;
+    let size = config.fit_config().size;
+    let fitted = super::fit::with_fit_progress(dataset, |observer| {
+        Ok(singrav::train::fit_training_target(
+            config, dataset, steps, observer,
+        )?)
+    })?;
     std::fs::create_dir_all(run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
     fitted.volume.save_safetensors(&path)?;
     eprintln!(
@@ -302,7 +269,7 @@ fn fit_for_training(
 pub fn run(args: &TrainArgs) -> Result<()> {
     let mut config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
-    config.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
+    config.run.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
     let options = args.options.run_options(&config, &dataset, &args.out)?;
     if options.resume && args.out.is_dir() && !args.out.join(CHECKPOINT_FILE).exists() {
         eprintln!(
@@ -369,7 +336,7 @@ pub fn load_dataset(
     depth_kind: Option<DepthKind>,
 ) -> Result<Dataset> {
     let options = LoadOptions {
-        background: config.background,
+        background: config.rendering.background,
         depth_kind,
     };
     let dataset = Dataset::load_with(path, &options)
@@ -426,7 +393,7 @@ pub fn train_with_progress(
             ),
             Event::ReconstructionFitting => bar.set_message(format!(
                 "fitting the reconstruction to the views ({} steps)",
-                config.reconstruction_fit_steps
+                config.schedule.reconstruction_fit_steps
             )),
             Event::ReconstructionFitted { batch_psnr } => print_line(
                 &bar,
@@ -466,38 +433,43 @@ pub fn device() -> Result<candle_core::Device> {
     Ok(candle_core::Device::Cpu)
 }
 
-/// The losses of a step, compactly.
+/// The losses of a step, compactly: the colour reconstruction first, then every other term
+/// computed.
 fn format_losses(l: &StepLosses) -> String {
-    let mut parts = vec![format!("rec {:.4}", l.color)];
-    let optional = [
-        ("depth", l.depth),
-        ("D", l.critic),
-        ("gp", l.penalty),
-        ("adv", l.adversarial),
-        ("swd", l.swd),
-        ("fit", l.fitted),
-        ("opacity", l.opacity),
-        ("colour", l.colour_distribution),
-        ("chroma", l.chroma_distribution),
-        ("height", l.height_profile),
-        ("binary", l.opacity_binary),
-        ("alpha-dist", l.opacity_distribution),
-        ("D3", l.volume_critic),
-        ("gp3", l.volume_penalty),
-        ("adv3", l.volume_adversarial),
-    ];
-    for (name, value) in optional {
-        if let Some(v) = value {
-            parts.push(format!("{name} {v:.3}"));
-        }
+    let mut parts = vec![format!(
+        "rec {:.4}",
+        l.get(LossTerm::Colour).unwrap_or_default()
+    )];
+    for (term, value) in l.iter().filter(|(term, _)| *term != LossTerm::Colour) {
+        parts.push(format!("{} {value:.3}", short_name(term)));
     }
     parts.join(" ")
+}
+
+/// A loss term's name on the progress bar.
+fn short_name(term: LossTerm) -> &'static str {
+    match term {
+        LossTerm::Critic => "D",
+        LossTerm::Penalty => "gp",
+        LossTerm::Adversarial => "adv",
+        LossTerm::Colour => "rec",
+        LossTerm::Depth => "depth",
+        LossTerm::Swd => "swd",
+        LossTerm::Fitted => "fit",
+        LossTerm::Opacity => "opacity",
+        LossTerm::ColourDistribution => "colour",
+        LossTerm::ChromaDistribution => "chroma",
+        LossTerm::HeightProfile => "height",
+        LossTerm::OpacityBinary => "binary",
+        LossTerm::VolumeCritic => "D3",
+        LossTerm::VolumePenalty => "gp3",
+        LossTerm::VolumeAdversarial => "adv3",
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use clap::Parser;
-    use singrav::config::Concurrent;
     use singrav::TrainConfig;
 
     use super::TrainOptions;
@@ -517,81 +489,42 @@ mod tests {
     #[test]
     fn presets_run_the_active_set_and_dense_turns_it_off() {
         let tiny = config(&["--preset", "tiny"]);
-        assert_eq!(tiny.sparse_from_scale, Some(2));
-        assert!(tiny.sparse_shell);
+        assert_eq!(tiny.active_set.from_scale, Some(2));
+        assert!(tiny.active_set.shell);
         let dense = config(&["--preset", "tiny", "--dense"]);
-        assert_eq!(dense.sparse_from_scale, None);
-        assert_eq!(config(&["--preset", "micro"]).sparse_from_scale, None);
-        let margin_only = config(&["--preset", "small", "--set", "sparse_shell=false"]);
-        assert_eq!(margin_only.sparse_from_scale, Some(2));
-        assert!(!margin_only.sparse_shell);
-    }
-
-    #[test]
-    fn concurrent_scales_set_consingans_training_and_bad_values_are_refused() {
-        assert_eq!(config(&["--preset", "tiny"]).concurrent, None);
-        let three = config(&["--preset", "tiny", "--concurrent-scales", "3"]);
-        assert_eq!(
-            three.concurrent,
-            Some(Concurrent {
-                scales: 3,
-                learning_rate_scale: 0.1,
-                first_scale: 1
-            })
-        );
-        let half = config(&[
-            "--concurrent-scales",
-            "3",
-            "--concurrent-learning-rate-scale",
-            "0.5",
-            "--concurrent-first-scale",
-            "2",
-        ]);
-        assert_eq!(
-            half.concurrent,
-            Some(Concurrent {
-                scales: 3,
-                learning_rate_scale: 0.5,
-                first_scale: 2
-            })
-        );
-        let parse = |args: &[&str]| {
-            Options::try_parse_from(std::iter::once("train").chain(args.iter().copied()))
-        };
-        // The factor or the first scale alone means nothing.
-        assert!(parse(&["--concurrent-learning-rate-scale", "0.5"]).is_err());
-        assert!(parse(&["--concurrent-first-scale", "2"]).is_err());
-        let zero = parse(&["--concurrent-scales", "0"])
-            .unwrap()
-            .options
-            .config();
-        let message = format!("{:#}", zero.unwrap_err());
-        assert!(message.contains("concurrent"), "{message}");
+        assert_eq!(dense.active_set.from_scale, None);
+        assert_eq!(config(&["--preset", "micro"]).active_set.from_scale, None);
+        let margin_only = config(&["--preset", "small", "--set", "active_set.shell=false"]);
+        assert_eq!(margin_only.active_set.from_scale, Some(2));
+        assert!(!margin_only.active_set.shell);
     }
 
     #[test]
     fn the_reconstruction_fit_is_the_presets_unless_given() {
         let preset = TrainConfig::preset("tiny")
             .unwrap()
+            .schedule
             .reconstruction_fit_steps;
         assert_eq!(
-            config(&["--preset", "tiny"]).reconstruction_fit_steps,
+            config(&["--preset", "tiny"])
+                .schedule
+                .reconstruction_fit_steps,
             preset
         );
         let given = config(&["--preset", "tiny", "--reconstruction-fit", "500"]);
-        assert_eq!(given.reconstruction_fit_steps, 500);
+        assert_eq!(given.schedule.reconstruction_fit_steps, 500);
         let off = config(&["--preset", "tiny", "--reconstruction-fit", "0"]);
-        assert_eq!(off.reconstruction_fit_steps, 0);
+        assert_eq!(off.schedule.reconstruction_fit_steps, 0);
     }
 
     #[test]
     fn the_fitted_weight_is_the_configurations_else_10_with_a_fitted_volume() {
-        assert_eq!(config(&["--preset", "tiny"]).lambda_fitted, 0.0);
+        assert_eq!(config(&["--preset", "tiny"]).losses.fitted, 0.0);
         let fit = config(&["--preset", "tiny", "--fit"]);
-        assert_eq!(fit.lambda_fitted, super::DEFAULT_LAMBDA_FITTED);
+        assert_eq!(fit.losses.fitted, super::DEFAULT_LAMBDA_FITTED);
         let fitted = config(&["--fitted", "v.safetensors", "--lambda-fitted", "3"]);
-        assert_eq!(fitted.lambda_fitted, 3.0);
-        let set = config(&["--fit", "--set", "lambda_fitted=2"]);
-        assert_eq!(set.lambda_fitted, 2.0, "--set comes after the flags");
+        assert_eq!(fitted.losses.fitted, 3.0);
+        let set = config(&["--fit", "--set", "losses.fitted=2"]);
+        assert_eq!(set.losses.fitted, 2.0, "--set comes after the flags");
     }
 }

@@ -6,7 +6,7 @@ use crate::error::{invalid, Result};
 
 /// The CSG coordinate of cell `i` on an axis of `n` cells: `2 ((i + 0.5) / n - 1/2) = (2i + 1)/n - 1`.
 ///
-/// Cells are cell-centred (DESIGN.md: cell `i` has its centre at `min + (i + 0.5) (max - min) / n`),
+/// Cells are cell-centred (docs/architecture.md: cell `i` has its centre at `min + (i + 0.5) (max - min) / n`),
 /// so the grid is the position of each voxel centre in the box `[-1, 1]`: symmetric about 0, first
 /// value `1/n - 1`, last value `1 - 1/n`. The paper's formula with the integer index `x` instead of
 /// `x + 0.5` would shift every value by `-1/n` and never reach the upper half symmetrically.
@@ -30,8 +30,8 @@ fn axis(n: usize, what: &'static str, device: &Device) -> Result<Tensor> {
     Ok(Tensor::from_vec(values, n, device)?)
 }
 
-/// The 3D CSG grid as an f32 tensor of shape `(3, D, H, W)` in DESIGN.md's volume layout (D along z,
-/// H along y, W along x).
+/// The 3D CSG grid as an f32 tensor of shape `(3, D, H, W)` in the workspace's volume layout (D along z,
+/// H along y, W along x; docs/architecture.md).
 ///
 /// Channel 0 is x (varies along W), channel 1 is y (along H), channel 2 is z (along D); the value at
 /// `[c, k, j, i]` is [`csg_coordinate`] of the index along that channel's axis.

@@ -4,7 +4,7 @@
 //! `e_csg(x, y, z) = 2 [x/W - 1/2, y/H - 1/2, z/U - 1/2]`, a 3-channel volume of spatial anchors
 //! that the coarsest generator receives with its noise.
 //!
-//! Conventions (shared with the rest of volgen, see DESIGN.md):
+//! Conventions (shared with the rest of volgen, see docs/architecture.md):
 //! - A volume is `(C, D, H, W)` (batched `(N, C, D, H, W)`), D along z, H along y, W along x.
 //! - Grid channels are ordered x, y, z: channel 0 varies along W, channel 1 along H, channel 2
 //!   along D. The 2D grid `(2, H, W)` has channels x, y.

@@ -2,9 +2,16 @@
 //! discriminator (and its 3D twin over volumes), the final 2D upsampler, and WGAN-GP losses.
 //!
 //! candle has no 3D convolution; [`Conv3d`] (and [`functional::conv3d`]) fills that gap on the CPU
-//! with a chunked im2col + `gemm` kernel and a backward pass for the input and the weight. The
-//! same kernel runs [`Conv2d`] ([`functional::conv2d`]), which the critics and the upsampler use:
-//! faster than candle's CPU conv2d, and differentiable to any order (the gradient penalty).
+//! with a chunked im2col + `gemm` kernel (Winograd F(2, 3) / F(4, 3) for 3-tap kernels of 16 or
+//! more input channels) and a backward pass for the input and the weight. The same kernels run
+//! [`Conv2d`] ([`functional::conv2d`]), which the critics and the upsampler use: faster than
+//! candle's CPU conv2d, and differentiable to any order (the gradient penalty).
+//!
+//! The kernels themselves, and the fused BatchNorm / LeakyReLU loops, are the `conv-kernels`
+//! crate's safe functions over plain slices: all of their `unsafe` code (SIMD, raw-pointer
+//! matrix products, uninitialised output buffers) lives there, under its stated policy, and this
+//! crate forbids `unsafe` code. It holds the candle custom ops around them, the layers, the
+//! networks and the losses.
 //! [`active`] runs a generator on the active sites of its volumes only (submanifold
 //! convolutions, [`Generator3d::forward_residual_active`]), at a cost in proportion to them.
 //!
@@ -45,17 +52,16 @@
 //! # Ok::<(), patch_gan::Error>(())
 //! ```
 
+#![forbid(unsafe_code)]
+
 pub mod active;
 mod conv;
 mod discriminator;
-mod element;
 mod error;
 mod fused;
 mod generator;
 mod init;
 mod norm;
-mod output;
-mod simd;
 mod storage;
 mod upsampler;
 mod wgan;

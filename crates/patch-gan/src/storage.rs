@@ -2,8 +2,7 @@
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, Layout};
-
-use crate::element::Element;
+use conv_kernels::Element;
 
 /// A kernel over the data of one or two same-dtype tensors, written once for every [`Element`].
 pub(crate) trait Kernel {

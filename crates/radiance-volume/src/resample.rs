@@ -45,7 +45,7 @@ fn resample_dim(x: &Tensor, dim: usize, n_out: usize) -> Result<Tensor> {
 /// Constant fields stay constant. Linear fields stay exact when down-sampling (every new centre
 /// lies between old centres) and, when up-sampling, at every new centre inside the hull of the
 /// old centres; the new centres beyond it take the clamped edge value, the convention of
-/// DESIGN.md. There is no low-pass pre-filter: when down-sampling by more than 2 the result can
+/// docs/architecture.md. There is no low-pass pre-filter: when down-sampling by more than 2 the result can
 /// alias (the pyramid's steps of 4/3 are well below that).
 ///
 /// ```

@@ -1,6 +1,6 @@
 //! Trilinear interpolation of a cell-centred grid at world points (CPU, on plain slices).
 //!
-//! The rule of DESIGN.md: exact values at cell centres, linear blends between neighbouring
+//! The rule of docs/architecture.md: exact values at cell centres, linear blends between neighbouring
 //! centres, values clamped to the edge between the outermost centres and the box faces, and every
 //! channel 0 outside the box (density 0 there is the rule that matters; colour and features are
 //! 0 too so that outside points are clearly "nothing").

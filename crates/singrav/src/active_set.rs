@@ -20,8 +20,8 @@ use candle_core::{DType, Tensor};
 use patch_gan::ActiveSites;
 use radiance_volume::Activation;
 
-use crate::dilate::dilate;
 use crate::error::{invalid, Result};
+use radiance_volume::dilate_mask;
 
 /// Which voxels of a finer scale are active, from the upsampled coarser volume.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,10 +121,10 @@ fn active_voxels(
     let mut active = Vec::with_capacity(batch * voxels);
     for volume in density.chunks_exact(voxels) {
         let occupied: Vec<bool> = volume.iter().map(|&v| v > raw_threshold).collect();
-        let near_matter = dilate(&occupied, [d, h, w], rule.margin);
+        let near_matter = dilate_mask(&occupied, [d, h, w], rule.margin)?;
         let near_air = if rule.shell {
             let air: Vec<bool> = occupied.iter().map(|&o| !o).collect();
-            dilate(&air, [d, h, w], rule.margin)
+            dilate_mask(&air, [d, h, w], rule.margin)?
         } else {
             vec![true; voxels]
         };

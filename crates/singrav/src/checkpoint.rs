@@ -130,8 +130,8 @@ impl Checkpoint {
             meta.get(key)
                 .ok_or_else(|| checkpoint_error(path, format!("metadata field `{key}` is missing")))
         };
-        let config: TrainConfig = serde_json::from_str(field("config")?)
-            .map_err(|e| checkpoint_error(path, format!("metadata `config`: {e}")))?;
+        let config = TrainConfig::from_json(field("config")?, "metadata `config`")
+            .map_err(|e| checkpoint_error(path, e.to_string()))?;
         let state: TrainState = serde_json::from_str(field("state")?)
             .map_err(|e| checkpoint_error(path, format!("metadata `state`: {e}")))?;
         config

@@ -13,17 +13,6 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
-    /// A dataset is malformed: `frame` names the frame (its `file_path`, or its index) when the
-    /// problem is in one frame.
-    #[error("{path}: {}{why}", frame.as_ref().map(|f| format!("frame {f}: ")).unwrap_or_default())]
-    Dataset {
-        /// The dataset file (usually `transforms.json`) or the image concerned.
-        path: PathBuf,
-        /// The frame concerned, if any.
-        frame: Option<String>,
-        /// What is wrong and what was expected.
-        why: String,
-    },
     /// A checkpoint is missing, malformed or does not match the configuration.
     #[error("checkpoint {path}: {why}")]
     Checkpoint {
@@ -84,6 +73,15 @@ pub enum Error {
     /// An error from swd-loss.
     #[error(transparent)]
     Swd(#[from] swd_loss::Error),
+    /// An error from rgbd-dataset (loading or making a dataset).
+    #[error(transparent)]
+    Dataset(#[from] rgbd_dataset::Error),
+    /// An error from scene-metrics.
+    #[error(transparent)]
+    Metrics(#[from] scene_metrics::Error),
+    /// An error from volume-fit.
+    #[error(transparent)]
+    Fit(#[from] volume_fit::Error),
     /// An error from csg-embed.
     #[error(transparent)]
     Csg(#[from] csg_embed::Error),

@@ -1,26 +1,27 @@
 //! SinGRAV: learning a generative radiance volume from multi-view RGB-D images of a single
 //! natural scene (Wang, Chen and Chen).
 //!
-//! - [`scenes`]: built-in procedural scenes (stones, mushrooms, islands), so the project needs
-//!   no download; [`dataset`] renders them into, and loads, NeRF-style RGB-D datasets.
+//! The datasets it learns from and the built-in scenes are [`rgbd_dataset`]'s; the metrics it is
+//! judged by, [`scene_metrics`]'s; the direct fit it can compare with, [`volume_fit`]'s.
+//!
 //! - [`export`]: volumes for tools that interpolate physical density, on finer grids.
-//! - [`fit`]: a direct fit of one radiance volume to a dataset (no networks), in about a minute.
 //! - [`TrainConfig`]: presets (`paper`, `small`, `tiny`, `micro`) and ablation switches.
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
 //! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
+//! - [`eval::evaluate`]: every quality number of a trained model against its dataset.
+//! - [`runtime::init`]: the process-wide settings that make training fast; call it first.
 //! - [`sample`]: new scenes from a trained model; [`applications`]: editing, harmonisation and
-//!   animation; [`metrics`]: Diversity-MV, SIFID-MV and weights-free quality numbers (PSNR, SSIM,
-//!   depth RMSE, patch and colour SWD, floaters).
+//!   animation.
 //!
 //! ```no_run
-//! use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
-//! use singrav::scenes::StandingStones;
+//! use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
+//! use rgbd_dataset::scenes::StandingStones;
 //! use singrav::train::{train, Control, RunOptions, TrainOutcome};
 //! use singrav::TrainConfig;
 //! let dir = std::path::Path::new("data/stones");
 //! write_dataset(&StandingStones::new(0), dir, &DatasetSpec::default())?;
 //! let config = TrainConfig::preset("tiny")?;
-//! let data = Dataset::load(dir, config.background)?;
+//! let data = Dataset::load(dir, config.rendering.background)?;
 //! let device = candle_core::Device::Cpu;
 //! let outcome = train(&config, &data, "runs/stones".as_ref(), &RunOptions::default(), &device, &mut |_| Control::Continue)?;
 //! if let TrainOutcome::Finished(model) = outcome {
@@ -37,20 +38,17 @@ pub mod active_set;
 pub mod applications;
 pub mod checkpoint;
 pub mod config;
-pub mod dataset;
-mod dilate;
 mod error;
+pub mod eval;
 pub mod export;
-pub mod fit;
 mod io;
-pub mod metrics;
 pub mod model;
 pub mod noise;
 pub mod optim;
 pub mod picture;
 pub mod render;
+pub mod runtime;
 pub mod sample;
-pub mod scenes;
 pub mod train;
 
 pub use config::{ScaleSchedule, ScaleViews, SwdFeatures, TrainConfig};

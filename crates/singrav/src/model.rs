@@ -130,8 +130,8 @@ impl SinGrav {
         let z_star = gaussian_volume(
             rng,
             FIRST_NOISE_CHANNELS,
-            config.volume_sizes[0],
-            config.noise_amp_first,
+            config.pyramid.volume_sizes[0],
+            config.noise.first_amplitude,
             device,
         )?;
         Self::with_z_star(config, device, z_star)
@@ -140,7 +140,7 @@ impl SinGrav {
     /// A pyramid with no trained scale and the given reconstruction noise.
     fn with_z_star(config: &TrainConfig, device: &Device, z_star: Tensor) -> Result<Self> {
         config.validate()?;
-        let size = config.volume_sizes[0];
+        let size = config.pyramid.volume_sizes[0];
         if z_star.dims() != [1, FIRST_NOISE_CHANNELS, size, size, size] {
             return Err(invalid(
                 "z_star",
@@ -150,7 +150,7 @@ impl SinGrav {
                 ),
             ));
         }
-        let csg = if config.use_csg {
+        let csg = if config.ablations.use_csg {
             Some(csg_embed::csg_grid_3d(size, size, size, device)?.unsqueeze(0)?)
         } else {
             None
@@ -202,20 +202,22 @@ impl SinGrav {
     /// the previous generator where shapes agree; returns its variables.
     pub fn push_generator(&mut self, amp: f64, rng: &mut impl rand::Rng) -> Result<VarMap> {
         let n = self.generators.len() + 1;
-        if n > self.config.volume_sizes.len() {
+        if n > self.config.pyramid.volume_sizes.len() {
             return Err(invalid(
                 "scale",
                 format!("the pyramid has only {} 3D scales", n - 1),
             ));
         }
         let map = VarMap::new();
-        let cfg = Generator3dConfig::for_scale(n, self.config.layers).with_in_channels(if n == 1 {
-            FIRST_NOISE_CHANNELS
-        } else {
-            VOLUME_CHANNELS
-        });
+        let cfg = Generator3dConfig::for_scale(n, self.config.pyramid.layers).with_in_channels(
+            if n == 1 {
+                FIRST_NOISE_CHANNELS
+            } else {
+                VOLUME_CHANNELS
+            },
+        );
         let cfg = Generator3dConfig {
-            channels: self.config.channels,
+            channels: self.config.pyramid.channels,
             ..cfg
         };
         let generator = Generator3d::new(
@@ -227,8 +229,8 @@ impl SinGrav {
             copy_matching(&var_tensors(previous), &map)?;
             zero_residual(&map)?;
         }
-        if n >= 2 && self.config.reconstruction_noise_lr > 0.0 {
-            let size = self.config.volume_sizes[n - 1];
+        if n >= 2 && self.config.noise.reconstruction_lr > 0.0 {
+            let size = self.config.pyramid.volume_sizes[n - 1];
             self.fine_z_star.push(Var::zeros(
                 (1, VOLUME_CHANNELS, size, size, size),
                 DType::F32,
@@ -247,7 +249,7 @@ impl SinGrav {
         let map = VarMap::new();
         let cfg = Upsampler2dConfig {
             channels: 3,
-            widths: self.config.upsampler_widths,
+            widths: self.config.pyramid.upsampler_widths,
         };
         let upsampler = Upsampler2d::new(
             &cfg,
@@ -282,7 +284,7 @@ impl SinGrav {
                 gaussian_volume(
                     rng,
                     channels,
-                    self.config.volume_sizes[n - 1],
+                    self.config.pyramid.volume_sizes[n - 1],
                     amp,
                     &self.device,
                 )
@@ -304,7 +306,7 @@ impl SinGrav {
             let z = match self.reconstruction_noise_var(n) {
                 Some(var) => var.as_tensor().clone(),
                 None => {
-                    let s = self.config.volume_sizes[n - 1];
+                    let s = self.config.pyramid.volume_sizes[n - 1];
                     Tensor::zeros((1, VOLUME_CHANNELS, s, s, s), DType::F32, &self.device)?
                 }
             };
@@ -326,7 +328,7 @@ impl SinGrav {
     /// scale is built.
     pub fn set_reconstruction_detail(&mut self, detail: Tensor) -> Result<()> {
         let scales = self.volume_scales();
-        let Some(&s) = self.config.volume_sizes.get(scales.wrapping_sub(1)) else {
+        let Some(&s) = self.config.pyramid.volume_sizes.get(scales.wrapping_sub(1)) else {
             return Err(invalid("reconstruction detail", "no 3D scale is built"));
         };
         let expected = [1, VOLUME_CHANNELS, s, s, s];
@@ -384,10 +386,9 @@ impl SinGrav {
         Ok(generator.forward_t(&input, true)?)
     }
 
-    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1,
-    /// plus `z` itself with the configuration's `noise_skip`; from the configuration's
-    /// `sparse_from_scale` on, the residual only in the active set of `up(prev)` (see
-    /// [`crate::active_set`]).
+    /// G_n for n >= 2: `up(prev) + G_n(z + up(prev))` with `prev` the raw volume of scale n - 1;
+    /// from the configuration's `active_set.from_scale` on, the residual only in the active set
+    /// of `up(prev)` (see [`crate::active_set`]).
     pub fn refine(&self, n: usize, z: &Tensor, prev: &Tensor) -> Result<Tensor> {
         let (generator, _) = self
             .generators
@@ -395,7 +396,7 @@ impl SinGrav {
             .filter(|_| n >= 2)
             .ok_or_else(|| invalid("scale", format!("3D scale {n} is not built")))?;
         let up = self.upsample_to_scale(prev, n)?;
-        let volume = match self.config.sparse_from_scale {
+        match self.config.active_set.from_scale {
             Some(from) if n >= from => {
                 let sites = Arc::new(active_sites(
                     &up,
@@ -403,20 +404,15 @@ impl SinGrav {
                     &self.config.active_set_rule(),
                     generator.config().kernel,
                 )?);
-                generator.forward_residual_active(z, &up, &sites, true)?
+                Ok(generator.forward_residual_active(z, &up, &sites, true)?)
             }
-            _ => generator.forward_residual(z, &up, true)?,
-        };
-        if self.config.noise_skip {
-            Ok((volume + z)?)
-        } else {
-            Ok(volume)
+            _ => Ok(generator.forward_residual(z, &up, true)?),
         }
     }
 
     /// Resamples a raw volume to the size of 3D scale `n` (trilinear, differentiable).
     pub fn upsample_to_scale(&self, volume: &Tensor, n: usize) -> Result<Tensor> {
-        let size = self.config.volume_sizes[n - 1];
+        let size = self.config.pyramid.volume_sizes[n - 1];
         Ok(resample_tensor(volume, GridDims::cube(size))?)
     }
 

@@ -105,12 +105,6 @@ impl Adam {
         Ok(())
     }
 
-    /// Sets the learning rate of the steps from now on (a schedule's decay); the moments are
-    /// kept.
-    pub fn set_learning_rate(&mut self, learning_rate: f64) {
-        self.learning_rate = learning_rate;
-    }
-
     /// The number of steps taken.
     pub fn steps(&self) -> usize {
         self.steps
@@ -145,84 +139,6 @@ impl Adam {
     }
 }
 
-/// An exponential moving average of a set of variables' values (Polyak averaging, as GANs
-/// sample from an average of the generator's weights: StyleGAN's `G_ema`): after every optimiser
-/// step, `average = decay * average + (1 - decay) * value`. The average starts at the values it
-/// is made from; [`WeightAverage::apply`] writes it into the variables.
-///
-/// ```
-/// use candle_core::{Device, Var};
-/// use singrav::optim::WeightAverage;
-/// let x = Var::new(&[0f32], &Device::Cpu)?;
-/// let mut average = WeightAverage::new(vec![("x".into(), x.clone())], 0.5)?;
-/// x.set(&candle_core::Tensor::new(&[4f32], &Device::Cpu)?)?;
-/// average.update()?; // 0.5 * 0 + 0.5 * 4
-/// average.apply()?;
-/// assert_eq!(x.as_tensor().to_vec1::<f32>()?, [2.0]);
-/// # Ok::<(), singrav::Error>(())
-/// ```
-#[derive(Debug)]
-pub struct WeightAverage {
-    params: Vec<(String, Var)>,
-    average: Vec<Tensor>,
-    decay: f64,
-}
-
-impl WeightAverage {
-    /// An average of `params` (names are used for checkpoints) starting at their values, with
-    /// the weight `decay` (in [0, 1)) on the past at every update.
-    pub fn new(params: Vec<(String, Var)>, decay: f64) -> Result<Self> {
-        crate::config::check_fraction("decay", "a weight average's decay", decay)?;
-        let average = params
-            .iter()
-            .map(|(_, v)| v.as_tensor().copy())
-            .collect::<candle_core::Result<_>>()?;
-        Ok(Self {
-            params,
-            average,
-            decay,
-        })
-    }
-
-    /// Moves the average towards the variables' current values.
-    pub fn update(&mut self) -> Result<()> {
-        for ((_, var), average) in self.params.iter().zip(&mut self.average) {
-            *average = ((&*average * self.decay)? + (var.as_tensor() * (1.0 - self.decay))?)?;
-        }
-        Ok(())
-    }
-
-    /// Sets every variable to its average.
-    pub fn apply(&self) -> Result<()> {
-        for ((_, var), average) in self.params.iter().zip(&self.average) {
-            var.set(average)?;
-        }
-        Ok(())
-    }
-
-    /// The averages as named tensors (`{prefix}{name}`).
-    pub fn state(&self, prefix: &str) -> HashMap<String, Tensor> {
-        self.params
-            .iter()
-            .zip(&self.average)
-            .map(|((name, _), average)| (format!("{prefix}{name}"), average.clone()))
-            .collect()
-    }
-
-    /// Restores the averages saved by [`WeightAverage::state`]; a variable without a saved
-    /// average (or with one of another shape) is an error naming it.
-    pub fn restore(
-        &mut self,
-        tensors: &HashMap<String, Tensor>,
-        prefix: &str,
-    ) -> std::result::Result<(), String> {
-        for ((name, var), slot) in self.params.iter().zip(&mut self.average) {
-            *slot = saved_like(tensors, &format!("{prefix}{name}"), var, "weight average")?;
-        }
-        Ok(())
-    }
-}
-
 /// The saved tensor `name` (a `what` of `var`, for messages), which must have `var`'s shape.
 fn saved_like(
     tensors: &HashMap<String, Tensor>,
@@ -247,7 +163,7 @@ fn saved_like(
 mod tests {
     use candle_core::{Device, Var};
 
-    use super::{Adam, WeightAverage};
+    use super::Adam;
 
     #[test]
     fn a_non_finite_gradient_names_the_variable_and_updates_nothing() {
@@ -276,39 +192,5 @@ mod tests {
         assert_eq!(adam.steps(), 0);
         assert_eq!(a.as_tensor().to_vec1::<f32>().unwrap(), [1.0, 2.0]);
         assert_eq!(b.as_tensor().to_vec1::<f32>().unwrap(), [3.0]);
-    }
-
-    #[test]
-    fn the_weight_average_is_the_exponential_average_of_every_updated_value() {
-        let x = Var::new(&[1f32, -1.0], &Device::Cpu).unwrap();
-        let decay = 0.9;
-        let mut average = WeightAverage::new(vec![("x".into(), x.clone())], decay).unwrap();
-        let steps = [[2.0f32, 0.5], [-3.0, 4.0], [0.25, 8.0]];
-        let mut expected = [1f64, -1.0];
-        for values in steps {
-            x.set(&candle_core::Tensor::new(&values, &Device::Cpu).unwrap())
-                .unwrap();
-            average.update().unwrap();
-            for (e, v) in expected.iter_mut().zip(values) {
-                *e = decay * *e + (1.0 - decay) * v as f64;
-            }
-        }
-        // Until applied, the variable keeps its own value.
-        assert_eq!(x.as_tensor().to_vec1::<f32>().unwrap(), [0.25, 8.0]);
-        let saved = average.state("avg.");
-        average.apply().unwrap();
-        let got = x.as_tensor().to_vec1::<f32>().unwrap();
-        for (g, e) in got.iter().zip(expected) {
-            assert!((*g as f64 - e).abs() < 1e-6, "{g} against {e}");
-        }
-        // Restored from its state, a fresh average applies the same values.
-        let y = Var::new(&[0f32, 0.0], &Device::Cpu).unwrap();
-        let mut restored = WeightAverage::new(vec![("x".into(), y.clone())], decay).unwrap();
-        restored.restore(&saved, "avg.").unwrap();
-        restored.apply().unwrap();
-        assert_eq!(y.as_tensor().to_vec1::<f32>().unwrap(), got);
-        let missing = restored.restore(&saved, "other.").unwrap_err();
-        assert!(missing.contains("other.x"), "{missing}");
-        assert!(WeightAverage::new(vec![("x".into(), x)], 1.0).is_err());
     }
 }

@@ -18,14 +18,13 @@ pub struct ViewRenderer {
 
 impl ViewRenderer {
     /// The renderer of training runs with `config`: `samples` uniform samples per ray, the
-    /// configured background, colour interpolation and density rule, and depth divided by
+    /// configured background and density rule, and depth divided by
     /// `depth_norm` (so it is about 1 at the far side of the box) when `with_depth`.
     pub fn new(config: &TrainConfig, samples: usize, depth_norm: f32, with_depth: bool) -> Self {
         let render = RenderConfig::default()
             .with_sampler(Sampler::Uniform { samples })
-            .with_background(config.background)
+            .with_background(config.rendering.background)
             .with_depth(with_depth)
-            .with_colour_interpolation(config.colour_interpolation())
             .with_density(config.density_interpolation());
         Self {
             activation: config.activation(),

@@ -10,11 +10,11 @@ use radiance_volume::{Aabb, Activation, RadianceVolume};
 use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
 
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
-use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::fit::{view_psnr, FitConfig};
 use crate::model::SinGrav;
 use crate::render::{ViewMaps, ViewRenderer};
+use rgbd_dataset::Dataset;
+use volume_fit::{view_psnr, FitConfig};
 
 /// One generated scene.
 pub struct Sample {
@@ -134,7 +134,7 @@ impl SinGrav {
     /// The physical volume of a raw volume `(1, 4, s, s, s)`, through the configuration's
     /// activation, in the scene's coordinates: over `[-1, 1]^3`, or when the run was trained
     /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) over their
-    /// [`cube`](crate::dataset::SceneBounds::cube) with density divided by its half side (the
+    /// [`cube`](rgbd_dataset::SceneBounds::cube) with density divided by its half side (the
     /// same opacity along the longer rays).
     pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
         let volume = self.config().activation().apply(&raw.squeeze(0)?)?;
@@ -151,9 +151,12 @@ impl SinGrav {
     /// The model's cube in the scene's coordinates and its half side: `[-1, 1]^3` and 1, or
     /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) their cube.
     fn scene_cube(&self) -> (Aabb, f32) {
-        self.config().bounds.map_or((Aabb::CUBE, 1.0), |bounds| {
-            (bounds.cube(), bounds.half_side())
-        })
+        self.config()
+            .run
+            .bounds
+            .map_or((Aabb::CUBE, 1.0), |bounds| {
+                (bounds.cube(), bounds.half_side())
+            })
     }
 
     /// A raw volume `(1, 4, s, s, s)` as a renderer outside the model takes it, in the scene's
@@ -174,7 +177,7 @@ impl SinGrav {
     /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
     /// let raw = (Tensor::ones((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)? * -2.0)?;
     /// let (volume, density) = model.to_rendered(&raw)?;
-    /// assert_eq!(density.post_activation(), Some([config.density_scale, config.density_shift]));
+    /// assert_eq!(density.post_activation(), Some([config.rendering.density_scale, config.rendering.density_shift]));
     /// // Density stays raw (volrender activates it per sample), colour is physical.
     /// let values: Vec<f32> = volume.tensor().flatten_all()?.to_vec1()?;
     /// assert_eq!((values[0], values[27]), (-2.0, 1.0 / (1.0 + 2f32.exp())));
@@ -182,14 +185,14 @@ impl SinGrav {
     /// ```
     pub fn to_rendered(&self, raw: &Tensor) -> Result<(RadianceVolume, DensityInterpolation)> {
         let config = self.config();
-        if !config.post_activation {
+        if !config.rendering.post_activation {
             return Ok((self.to_physical(raw)?, DensityInterpolation::Physical));
         }
         let volume = config.activation().apply_colour(&raw.squeeze(0)?)?;
         let (aabb, half_side) = self.scene_cube();
         let density = DensityInterpolation::PostActivated {
-            scale: config.density_scale / half_side,
-            shift: config.density_shift,
+            scale: config.rendering.density_scale / half_side,
+            shift: config.rendering.density_shift,
         };
         Ok((RadianceVolume::new(volume, aabb)?, density))
     }
@@ -203,7 +206,7 @@ impl SinGrav {
     /// ```no_run
     /// # let device = candle_core::Device::Cpu;
     /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
-    /// let data = singrav::dataset::Dataset::load("data/stones".as_ref(), model.config().background)?;
+    /// let data = rgbd_dataset::Dataset::load("data/stones".as_ref(), model.config().rendering.background)?;
     /// let all: Vec<usize> = (0..data.len()).collect();
     /// println!("V*'s volume: {:.2} dB", model.volume_psnr(&model.reconstruct()?, &data, &all)?);
     /// # Ok::<(), singrav::Error>(())
@@ -218,8 +221,7 @@ impl SinGrav {
             None => defaults.activation,
         };
         let config = FitConfig {
-            background: self.config().background,
-            colour_interpolation: self.config().colour_interpolation(),
+            background: self.config().rendering.background,
             post_activation: density.post_activation().is_some(),
             activation,
             ..defaults
@@ -312,7 +314,12 @@ impl SinGrav {
     /// The renderer of the finest 3D scale, depth in world units.
     fn final_renderer(&self) -> ViewRenderer {
         let last = self.volume_scales();
-        ViewRenderer::new(self.config(), self.config().samples[last - 1], 1.0, false)
+        ViewRenderer::new(
+            self.config(),
+            self.config().pyramid.samples[last - 1],
+            1.0,
+            false,
+        )
     }
 
     /// Colour renderings of the 3D pyramid as the model outputs them: doubled by G_N when it
@@ -327,6 +334,6 @@ impl SinGrav {
 
     /// The rendering size the 3D pyramid produces (cameras for [`SinGrav::sample`] use it).
     pub fn render_size(&self) -> usize {
-        self.config().image_sizes[self.volume_scales() - 1]
+        self.config().pyramid.image_sizes[self.volume_scales() - 1]
     }
 }

@@ -6,9 +6,9 @@ use std::path::Path;
 
 use candle_core::{Device, Tensor};
 use glam::Vec3;
+use rgbd_dataset::scenes::SceneKind;
+use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, SceneBounds};
 use serde_json::Value;
-use singrav::dataset::{write_dataset, Dataset, DatasetSpec, SceneBounds};
-use singrav::scenes::SceneKind;
 
 const SPEC: DatasetSpec = DatasetSpec {
     views: 6,
@@ -141,15 +141,13 @@ fn boxes_that_cannot_hold_the_scene_are_refused() {
 fn micro_and_placed(
     post_activation: bool,
 ) -> (singrav::TrainConfig, SceneBounds, singrav::TrainConfig) {
-    let plain = singrav::TrainConfig {
-        post_activation,
-        ..singrav::TrainConfig::preset("micro").unwrap()
-    };
+    let plain = singrav::TrainConfig::preset("micro").unwrap().with(|c| {
+        c.rendering.post_activation = post_activation;
+    });
     let bounds = moved_box(-1.0, 0.6);
-    let placed = singrav::TrainConfig {
-        bounds: Some(bounds),
-        ..plain.clone()
-    };
+    let placed = plain.clone().with(|c| {
+        c.run.bounds = Some(bounds);
+    });
     (plain, bounds, placed)
 }
 
@@ -222,7 +220,7 @@ fn post_activated_volumes_render_outside_the_model_as_inside() {
         let (volume, density) = model(config).to_rendered(&raw).unwrap();
         let cfg = RenderConfig::default()
             .with_sampler(Sampler::Uniform { samples })
-            .with_background(config.background)
+            .with_background(config.rendering.background)
             .with_opacity(true)
             .with_aabb(volume.aabb())
             .with_density(density);
@@ -237,10 +235,9 @@ fn post_activated_volumes_render_outside_the_model_as_inside() {
         }
     }
     // A run rendering physical density hands out its physical volume.
-    let physical = singrav::TrainConfig {
-        post_activation: false,
-        ..plain.clone()
-    };
+    let physical = plain.clone().with(|c| {
+        c.rendering.post_activation = false;
+    });
     let (volume, density) = model(&physical).to_rendered(&raw).unwrap();
     assert_eq!(density, volrender::DensityInterpolation::Physical);
     let want = model(&physical).to_physical(&raw).unwrap();
@@ -288,7 +285,7 @@ fn finer_physical_volumes_render_as_the_model_does() {
             assert_eq!(volume.aabb(), cube);
             let cfg = RenderConfig::default()
                 .with_sampler(Sampler::Uniform { samples })
-                .with_background(placed.background)
+                .with_background(placed.rendering.background)
                 .with_aabb(volume.aabb());
             let rgb = values(&render(volume.tensor(), &rays, &cfg).unwrap().rgb);
             let sum: f32 = rgb.iter().zip(&own).map(|(a, b)| (a - b).powi(2)).sum();

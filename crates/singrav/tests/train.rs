@@ -1,19 +1,23 @@
 //! Training with the `micro` preset: finite losses, falling reconstruction, reproducibility,
 //! and a killed-then-resumed run ending with the same weights as an uninterrupted one.
+//!
+//! Longer than the project's ~800 lines on purpose: every training test shares the dataset and
+//! run helpers below, and one file is one test binary that links candle once.
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
+use rgbd_dataset::scenes::StandingStones;
+use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
-use singrav::config::Concurrent;
-use singrav::dataset::{write_dataset, Dataset, DatasetSpec};
-use singrav::fit::{fit_volume, FitConfig};
 use singrav::model::RECONSTRUCTION_DETAIL_TENSOR;
-use singrav::scenes::StandingStones;
-use singrav::train::{train, Control, Event, Progress, RunOptions, StepLosses, TrainOutcome};
+use singrav::train::{
+    train, Control, Event, LossTerm, Progress, RunOptions, StepLosses, TrainOutcome,
+};
 use singrav::{Error, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
+use volume_fit::fit_volume;
 
 /// A small dataset of the stones scene at the micro preset's final resolution.
 fn dataset(dir: &Path) -> Dataset {
@@ -157,29 +161,27 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let data = dataset(&tmp.path().join("data"));
     // Every optional term and the active set on, so that each runs once.
     let mut config = micro();
-    config.lambda_chroma = 1.0;
-    config.lambda_height_profile = 1.0;
-    config.lambda_opacity_binary = 1.0;
-    config.lambda_opacity_distribution = 1.0;
-    config.sparse_from_scale = Some(2);
-    config.sparse_shell = true;
+    config.losses.chroma_distribution = 1.0;
+    config.losses.height_profile = 1.0;
+    config.losses.opacity_binary = 1.0;
+    config.active_set.from_scale = Some(2);
+    config.active_set.shell = true;
     let run = tmp.path().join("run");
     let (model, steps) = run_to_end(&config, &data, &run);
     assert_eq!(steps.len(), config.total_iterations());
     for (scale, l) in &steps {
         let terms = [
-            l.critic,
-            l.penalty,
-            l.adversarial,
-            Some(l.color),
-            l.depth,
-            l.swd,
-            l.opacity,
-            l.colour_distribution,
-            l.chroma_distribution,
-            l.height_profile,
-            l.opacity_binary,
-            l.opacity_distribution,
+            l.get(LossTerm::Critic),
+            l.get(LossTerm::Penalty),
+            l.get(LossTerm::Adversarial),
+            l.get(LossTerm::Colour),
+            l.get(LossTerm::Depth),
+            l.get(LossTerm::Swd),
+            l.get(LossTerm::Opacity),
+            l.get(LossTerm::ColourDistribution),
+            l.get(LossTerm::ChromaDistribution),
+            l.get(LossTerm::HeightProfile),
+            l.get(LossTerm::OpacityBinary),
         ];
         assert!(
             terms.iter().flatten().all(|v| v.is_finite()),
@@ -187,27 +189,35 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
         );
         // The opacity reconstruction is a term of the 3D scales only.
         assert_eq!(
-            l.opacity.is_some(),
+            l.get(LossTerm::Opacity).is_some(),
             *scale < config.scales(),
             "scale {scale}"
         );
         // The colour distribution of generated scenes: the 3D scales' adversarial iterations.
-        let compared =
-            *scale < config.scales() && l.adversarial.is_some() && config.lambda_colour > 0.0;
-        assert_eq!(l.colour_distribution.is_some(), compared, "scale {scale}");
-        let on_samples = *scale < config.scales() && l.adversarial.is_some();
+        let compared = *scale < config.scales()
+            && l.get(LossTerm::Adversarial).is_some()
+            && config.losses.colour_distribution > 0.0;
+        assert_eq!(
+            l.get(LossTerm::ColourDistribution).is_some(),
+            compared,
+            "scale {scale}"
+        );
+        let on_samples = *scale < config.scales() && l.get(LossTerm::Adversarial).is_some();
         for term in [
-            l.chroma_distribution,
-            l.height_profile,
-            l.opacity_binary,
-            l.opacity_distribution,
+            l.get(LossTerm::ChromaDistribution),
+            l.get(LossTerm::HeightProfile),
+            l.get(LossTerm::OpacityBinary),
         ] {
             assert_eq!(term.is_some(), on_samples, "scale {scale}: {l:?}");
         }
     }
     // Adversarial terms appear after the reconstruction-only iterations; SWD only at the end.
-    assert!(steps.iter().any(|(s, l)| *s == 3 && l.swd.is_some()));
-    assert!(steps.iter().all(|(s, l)| *s == 3 || l.swd.is_none()));
+    assert!(steps
+        .iter()
+        .any(|(s, l)| *s == 3 && l.get(LossTerm::Swd).is_some()));
+    assert!(steps
+        .iter()
+        .all(|(s, l)| *s == 3 || l.get(LossTerm::Swd).is_none()));
     for n in 1..=config.scales() {
         let png = image::open(run.join("samples").join(format!("scale_{n}.png"))).unwrap();
         assert!(png.width() > png.height());
@@ -218,7 +228,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let cams = singrav::sample::showcase_cameras(2, model.render_size()).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let sample = model.sample(&mut rng, &cams).unwrap();
-    let size = config.volume_sizes[1];
+    let size = config.pyramid.volume_sizes[1];
     assert_eq!(sample.volume.tensor().dims(), &[4, size, size, size]);
     assert_eq!(
         sample.views.dims(),
@@ -250,32 +260,31 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
 fn reconstruction_loss_falls() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        g_steps: 2,
-        ..micro()
-    }
-    .with_scales(2)
-    .unwrap();
-    let config = TrainConfig {
-        schedule: vec![
+    let config = micro()
+        .with(|c| {
+            c.schedule.g_steps = 2;
+        })
+        .with_scales(2)
+        .unwrap();
+    let config = config.with(|c| {
+        c.schedule.scales = vec![
             ScaleSchedule {
                 iterations: 16,
                 reconstruction_only: 16
             };
             2
-        ],
-        ..config
-    };
+        ];
+    });
     let (_, steps) = run_to_end(&config, &data, &tmp.path().join("run"));
     let colour: Vec<f32> = steps
         .iter()
         .filter(|(s, _)| *s == 1)
-        .map(|(_, l)| l.color)
+        .map(|(_, l)| l.get(LossTerm::Colour).unwrap())
         .collect();
     let depth: Vec<f32> = steps
         .iter()
         .filter(|(s, _)| *s == 1)
-        .map(|(_, l)| l.depth.unwrap())
+        .map(|(_, l)| l.get(LossTerm::Depth).unwrap())
         .collect();
     let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
     assert!(
@@ -289,7 +298,7 @@ fn reconstruction_loss_falls() {
     let opacity: Vec<f32> = steps
         .iter()
         .filter(|(s, _)| *s == 1)
-        .map(|(_, l)| l.opacity.unwrap())
+        .map(|(_, l)| l.get(LossTerm::Opacity).unwrap())
         .collect();
     assert!(
         mean(&opacity[12..]) < 0.8 * mean(&opacity[..4]),
@@ -306,7 +315,9 @@ fn same_seed_same_weights_other_seed_other_weights() {
     run_to_end(&config, &data, &tmp.path().join("b"));
     let a = checkpoint_tensors(&tmp.path().join("a"));
     assert_same_tensors(&a, &checkpoint_tensors(&tmp.path().join("b")));
-    let other = TrainConfig { seed: 9, ..config };
+    let other = config.with(|c| {
+        c.run.seed = 9;
+    });
     run_to_end(&other, &data, &tmp.path().join("c"));
     let c = checkpoint_tensors(&tmp.path().join("c"));
     let differs = |name: &str| {
@@ -321,23 +332,25 @@ fn same_seed_same_weights_other_seed_other_weights() {
 fn a_run_that_compares_with_a_fitted_volume_and_has_none_fits_one_first() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        lambda_fitted: 1.0,
-        post_activation: true,
-        ..micro().with_scales(2).unwrap()
-    };
+    let config = micro().with_scales(2).unwrap().with(|c| {
+        c.losses.fitted = 1.0;
+        c.rendering.post_activation = true;
+    });
     let run = tmp.path().join("run");
     let (_, steps) = run_to_end(&config, &data, &run);
-    let three_d = config.volume_sizes.len();
+    let three_d = config.pyramid.volume_sizes.len();
     assert!(steps
         .iter()
-        .all(|(n, losses)| losses.fitted.is_some() == (*n <= three_d)));
-    // The run's copy is the fit `FitConfig::for_training` describes: post-activated, so on the
+        .all(|(n, losses)| losses.get(LossTerm::Fitted).is_some() == (*n <= three_d)));
+    // The run's copy is the fit `TrainConfig::fit_config` describes: post-activated, so on the
     // finest 3D scale's own grid.
     let copy =
         radiance_volume::RadianceVolume::load_safetensors(run.join("fitted.safetensors")).unwrap();
-    let fit_config = FitConfig::for_training(&config);
-    assert_eq!(fit_config.size, *config.volume_sizes.last().unwrap());
+    let fit_config = config.fit_config();
+    assert_eq!(
+        fit_config.size,
+        *config.pyramid.volume_sizes.last().unwrap()
+    );
     let all: Vec<usize> = (0..data.len()).collect();
     let direct = fit_volume(&data, &all, &fit_config, &mut |_| {}).unwrap();
     assert_eq!(copy.dims(), direct.volume.dims());
@@ -352,10 +365,9 @@ fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
     let plain = micro().with_scales(2).unwrap();
-    let held = TrainConfig {
-        holdout: Some(3),
-        ..plain.clone()
-    };
+    let held = plain.clone().with(|c| {
+        c.run.holdout = Some(3);
+    });
     run_to_end(&held, &data, &tmp.path().join("held"));
     // Frames 0 and 3 are held out: the run sees frames 1, 2, 4 and 5 only.
     let training = data.subset(&[1, 2, 4, 5]).unwrap();
@@ -367,11 +379,10 @@ fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
     let recorded = Checkpoint::load(&tmp.path().join("held").join(CHECKPOINT_FILE), &Device::Cpu)
         .unwrap()
         .config;
-    assert_eq!(recorded.holdout, Some(3));
-    let bad = TrainConfig {
-        holdout: Some(1),
-        ..plain
-    };
+    assert_eq!(recorded.run.holdout, Some(3));
+    let bad = plain.with(|c| {
+        c.run.holdout = Some(1);
+    });
     let err = bad.validate().unwrap_err().to_string();
     assert!(err.contains("holdout") && err.contains("got 1"), "{err}");
 }
@@ -380,10 +391,9 @@ fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
 fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        checkpoint_iterations: 2,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.run.checkpoint_iterations = 2;
+    });
     run_to_end(&config, &data, &tmp.path().join("whole"));
 
     // Killed in scale 2 after iteration 3: the last checkpoint is from iteration 2.
@@ -438,10 +448,9 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
 fn a_nan_stops_the_run_at_once_and_resume_continues_from_the_last_good_checkpoint() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        checkpoint_iterations: 1,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.run.checkpoint_iterations = 1;
+    });
     run_to_end(&config, &data, &tmp.path().join("whole"));
 
     // G_2's weights turn NaN before iteration 2 of scale 2.
@@ -509,13 +518,12 @@ fn resume_refuses_another_configuration_and_names_the_field() {
     let config = micro().with_scales(2).unwrap();
     let run = tmp.path().join("run");
     run_to_end(&config, &data, &run);
-    let other = TrainConfig {
-        lambda_depth: 1.0,
-        ..config
-    };
+    let other = config.with(|c| {
+        c.losses.depth = 1.0;
+    });
     let err = train_error(&other, &data, &run, &resume());
     assert!(
-        err.contains("lambda_depth") && err.contains(CHECKPOINT_FILE),
+        err.contains("losses.depth") && err.contains(CHECKPOINT_FILE),
         "{err}"
     );
 
@@ -556,30 +564,29 @@ fn diversity_mv_matches_a_hand_computation() {
     // Two scenes differing by 0.2 everywhere: per-pixel population std 0.1.
     let a = Tensor::new(&[[[[0.3f32, 0.6]], [[0.3, 0.6]], [[0.3, 0.6]]]], &dev).unwrap();
     let b = (&a + 0.2).unwrap();
-    let d = singrav::metrics::diversity_mv(&[a.clone(), b], &real).unwrap();
+    let d = scene_metrics::diversity_mv(&[a.clone(), b], &real).unwrap();
     assert!((d - 0.1 / 0.5).abs() < 1e-6, "{d}");
-    assert!(singrav::metrics::diversity_mv(std::slice::from_ref(&a), &real).is_err());
+    assert!(scene_metrics::diversity_mv(std::slice::from_ref(&a), &real).is_err());
     let flat = Tensor::full(0.5f32, (1, 3, 1, 2), &dev).unwrap();
-    assert!(singrav::metrics::diversity_mv(&[a.clone(), a], &flat).is_err());
+    assert!(scene_metrics::diversity_mv(&[a.clone(), a], &flat).is_err());
 }
 
 #[test]
 fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        schedule: vec![
+    let config = micro().with(|c| {
+        c.schedule.scales = vec![
             ScaleSchedule {
                 iterations: 2,
                 reconstruction_only: 1
             };
             4
-        ],
-        volume_sizes: vec![8, 11, 14],
-        image_sizes: vec![12, 18, 24],
-        samples: vec![16, 16, 16],
-        ..micro()
-    };
+        ];
+        c.pyramid.volume_sizes = vec![8, 11, 14];
+        c.pyramid.image_sizes = vec![12, 18, 24];
+        c.pyramid.samples = vec![16, 16, 16];
+    });
     let (model, _) = run_to_end(&config, &data, &tmp.path().join("run"));
     let walk = singrav::applications::WalkConfig::default();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
@@ -655,12 +662,11 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
     }
 }
 
-/// A model of `config` with two fresh 3D scales, the coarser one's reconstruction, noise of
-/// the finer scale's shape, what scale 2 makes of them, and the rng that drew them.
+/// A model of `config` with two fresh 3D scales, the coarser one's reconstruction, what scale 2
+/// makes of it with noise of its shape, and the rng that drew them.
 struct TwoScales {
     model: SinGrav,
     coarse: Tensor,
-    z: Tensor,
     refined: Tensor,
     rng: rand_chacha::ChaCha8Rng,
 }
@@ -672,13 +678,12 @@ fn two_fresh_scales(config: &TrainConfig) -> TwoScales {
     model.push_generator(1.0, &mut rng).unwrap();
     let coarse = model.coarsest(model.z_star()).unwrap();
     model.push_generator(0.1, &mut rng).unwrap();
-    let size = config.volume_sizes[1];
+    let size = config.pyramid.volume_sizes[1];
     let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
     let refined = model.refine(2, &z, &coarse).unwrap();
     TwoScales {
         model,
         coarse,
-        z,
         refined,
         rng,
     }
@@ -708,36 +713,12 @@ fn new_finer_scales_start_as_the_identity_on_the_coarser_output() {
     assert_eq!(largest_difference(&doubled, &bilinear), 0.0);
 }
 
-/// With `noise_skip` a scale's noise reaches its volume directly: a new finer scale (whose
-/// generator starts at a zero residual) gives exactly `up(coarser) + z`, on the dense path and
-/// on the active set's.
-#[test]
-fn with_noise_skip_a_new_scale_adds_its_noise_to_the_upsampled_volume() {
-    for sparse_from_scale in [None, Some(2)] {
-        let config = TrainConfig {
-            noise_skip: true,
-            sparse_from_scale,
-            ..micro()
-        };
-        let TwoScales {
-            model,
-            coarse,
-            z,
-            refined,
-            ..
-        } = two_fresh_scales(&config);
-        let expected = (model.upsample_to_scale(&coarse, 2).unwrap() + &z).unwrap();
-        let largest = largest_difference(&refined, &expected);
-        assert_eq!(largest, 0.0, "sparse_from_scale {sparse_from_scale:?}");
-    }
-}
-
 #[test]
 fn active_set_scales_change_the_volume_only_near_matter() {
     let mut config = micro();
-    config.sparse_from_scale = Some(2);
-    config.sparse_threshold = 0.1;
-    config.sparse_margin = 1;
+    config.active_set.from_scale = Some(2);
+    config.active_set.threshold = 0.1;
+    config.active_set.margin = 1;
     let device = Device::Cpu;
     let mut rng = singrav::noise::step_rng(0, 0, 0);
     let mut model = SinGrav::new(&config, &device, &mut rng).unwrap();
@@ -749,7 +730,7 @@ fn active_set_scales_change_the_volume_only_near_matter() {
         var.set(&noise).unwrap();
     }
     // Matter in one slab of the coarser volume (raw density 10: sigma ~ 25 * 6), air elsewhere.
-    let coarse_size = config.volume_sizes[0];
+    let coarse_size = config.pyramid.volume_sizes[0];
     let slab = coarse_size / 2;
     let raw: Vec<f32> = (0..4 * coarse_size.pow(3))
         .map(|i| {
@@ -766,7 +747,7 @@ fn active_set_scales_change_the_volume_only_near_matter() {
         .collect();
     let coarse =
         Tensor::from_vec(raw, (1, 4, coarse_size, coarse_size, coarse_size), &device).unwrap();
-    let size = config.volume_sizes[1];
+    let size = config.pyramid.volume_sizes[1];
     let z = singrav::noise::gaussian_volume(&mut rng, 4, size, 0.1, &device).unwrap();
     let values = |t: Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
     let refined = values(model.refine(2, &z, &coarse).unwrap());
@@ -790,7 +771,7 @@ fn active_set_scales_change_the_volume_only_near_matter() {
         "{changed} values changed, {active} voxels active"
     );
     // The paper's dense model, same weights, changes the inactive voxels too.
-    config.sparse_from_scale = None;
+    config.active_set.from_scale = None;
     let dense = SinGrav::from_tensors(
         &config,
         &model.tensors(),
@@ -845,10 +826,9 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
     let data = dataset(&tmp.path().join("data"));
     let weights = tmp.path().join("vgg19.safetensors");
     write_random_vgg19(&weights);
-    let config = TrainConfig {
-        swd_features: SwdFeatures::Vgg19,
-        ..micro().with_scales(2).unwrap()
-    };
+    let config = micro().with_scales(2).unwrap().with(|c| {
+        c.losses.swd_features = SwdFeatures::Vgg19;
+    });
     let with_weights = RunOptions {
         vgg19_weights: Some(weights.clone()),
         ..RunOptions::default()
@@ -857,13 +837,21 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
     let (_, steps) = run_with(&config, &data, &run, &with_weights);
     let last = config.scales();
     for (scale, l) in &steps {
-        let terms = [l.critic, l.penalty, l.adversarial, Some(l.color), l.swd];
+        let terms = [
+            l.get(LossTerm::Critic),
+            l.get(LossTerm::Penalty),
+            l.get(LossTerm::Adversarial),
+            l.get(LossTerm::Colour),
+            l.get(LossTerm::Swd),
+        ];
         assert!(
             terms.iter().flatten().all(|v| v.is_finite()),
             "scale {scale}: {l:?}"
         );
     }
-    assert!(steps.iter().any(|(s, l)| *s == last && l.swd.is_some()));
+    assert!(steps
+        .iter()
+        .any(|(s, l)| *s == last && l.get(LossTerm::Swd).is_some()));
     let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
     let logged_swd = log.lines().any(|line| {
         let entry: serde_json::Value = serde_json::from_str(line).unwrap();
@@ -879,10 +867,9 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
     // A resume cannot silently switch to the patch pyramid (the configuration records VGG-19)
     // nor run VGG-19 without its weights.
     let switched = train_error(
-        &TrainConfig {
-            swd_features: SwdFeatures::PatchPyramid,
-            ..config.clone()
-        },
+        &config.clone().with(|c| {
+            c.losses.swd_features = SwdFeatures::PatchPyramid;
+        }),
         &data,
         &run,
         &resume(),
@@ -896,10 +883,9 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
 fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        swd_features: SwdFeatures::Vgg19,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.losses.swd_features = SwdFeatures::Vgg19;
+    });
     let broken = tmp.path().join("broken.safetensors");
     std::fs::write(&broken, b"not safetensors").unwrap();
     let truncated = tmp.path().join("truncated.safetensors");
@@ -942,12 +928,12 @@ fn missing_or_broken_vgg19_weights_fail_before_training_naming_the_file() {
         },
     );
     assert!(unused.contains("vgg19_weights"), "{unused}");
-    assert!(TrainConfig {
-        use_swd: false,
-        ..config
-    }
-    .validate()
-    .is_err());
+    assert!(config
+        .with(|c| {
+            c.ablations.use_swd = false;
+        })
+        .validate()
+        .is_err());
 }
 
 /// A 3D critic judges the generated volumes against a fitted volume: its losses are logged at
@@ -970,29 +956,42 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
         ..RunOptions::default()
     };
     // The critic alone, without the 3D comparison of the reconstruction.
-    let config = TrainConfig {
-        lambda_volume_critic: 1.0,
-        checkpoint_iterations: 2,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.losses.volume_critic = 1.0;
+        c.run.checkpoint_iterations = 2;
+    });
     let whole = tmp.path().join("whole");
     let (_, steps) = run_with(&config, &data, &whole, &options);
-    let volume_scales = config.volume_sizes.len();
+    let volume_scales = config.pyramid.volume_sizes.len();
     for (scale, losses) in &steps {
-        let judged = *scale <= volume_scales && losses.critic.is_some();
-        assert_eq!(losses.volume_critic.is_some(), judged, "scale {scale}");
-        assert_eq!(losses.volume_penalty.is_some(), judged, "scale {scale}");
-        assert_eq!(losses.volume_adversarial.is_some(), judged, "scale {scale}");
-        assert!(losses.fitted.is_none());
+        let judged = *scale <= volume_scales && losses.get(LossTerm::Critic).is_some();
+        assert_eq!(
+            losses.get(LossTerm::VolumeCritic).is_some(),
+            judged,
+            "scale {scale}"
+        );
+        assert_eq!(
+            losses.get(LossTerm::VolumePenalty).is_some(),
+            judged,
+            "scale {scale}"
+        );
+        assert_eq!(
+            losses.get(LossTerm::VolumeAdversarial).is_some(),
+            judged,
+            "scale {scale}"
+        );
+        assert!(losses.get(LossTerm::Fitted).is_none());
         for value in [
-            losses.volume_critic,
-            losses.volume_penalty,
-            losses.volume_adversarial,
+            losses.get(LossTerm::VolumeCritic),
+            losses.get(LossTerm::VolumePenalty),
+            losses.get(LossTerm::VolumeAdversarial),
         ] {
             assert!(value.is_none_or(f32::is_finite));
         }
     }
-    assert!(steps.iter().any(|(_, l)| l.volume_critic.is_some()));
+    assert!(steps
+        .iter()
+        .any(|(_, l)| l.get(LossTerm::VolumeCritic).is_some()));
 
     let without = tmp.path().join("without");
     run_to_end(&micro(), &data, &without);
@@ -1022,116 +1021,14 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
     // (`a_run_that_compares_with_a_fitted_volume_and_has_none_fits_one_first`).
 }
 
-/// Concurrent training (ConSinGAN): G_1 keeps training through scale 2 (on the active set's
-/// sparse path too), its optimiser is in mid-scale checkpoints, a killed run resumes to the
-/// uninterrupted weights, and one concurrent scale, or G_1 kept out of it, is the paper's
-/// training bit for bit.
-#[test]
-fn concurrent_training_trains_the_coarser_generator_and_resumes() {
-    let tmp = tempfile::tempdir().unwrap();
-    let data = dataset(&tmp.path().join("data"));
-    let plain = TrainConfig {
-        checkpoint_iterations: 2,
-        // G_2 on the active set, so G_1's gradient passes through the sparse generator.
-        sparse_from_scale: Some(2),
-        ..micro()
-    };
-    let config = TrainConfig {
-        concurrent: Some(Concurrent {
-            scales: 2,
-            learning_rate_scale: 0.5,
-            first_scale: 1,
-        }),
-        ..plain.clone()
-    };
-    let g1 = |tensors: &HashMap<String, Tensor>| -> Vec<(String, Vec<f32>)> {
-        let mut named: Vec<_> = tensors
-            .iter()
-            .filter(|(name, _)| name.starts_with("g1.") && !name.contains("running"))
-            .map(|(name, t)| (name.clone(), t.flatten_all().unwrap().to_vec1().unwrap()))
-            .collect();
-        named.sort_by(|a, b| a.0.cmp(&b.0));
-        named
-    };
-
-    // Stopped at the end of scale 1: G_1 as scale 1 left it, the same with and without.
-    let after_scale_1 = |config: &TrainConfig, dir: &Path| {
-        let mut stop = |p: &Progress| match p.event {
-            Event::ScaleDone(_) => Control::Stop,
-            _ => Control::Continue,
-        };
-        train(
-            config,
-            &data,
-            dir,
-            &RunOptions::default(),
-            &Device::Cpu,
-            &mut stop,
-        )
-        .unwrap();
-        g1(&checkpoint_tensors(dir))
-    };
-    let g1_plain = after_scale_1(&plain, &tmp.path().join("plain1"));
-    assert_eq!(g1_plain, after_scale_1(&config, &tmp.path().join("conc1")));
-
-    let whole = tmp.path().join("whole");
-    run_to_end(&config, &data, &whole);
-    let finished = checkpoint_tensors(&whole);
-    let g1_concurrent = g1(&finished);
-    // Every weight tensor of G_1 moved during scale 2 (the paper's run leaves it frozen); the
-    // biases of convolutions before a BatchNorm have no gradient (the batch mean cancels them).
-    for ((name, before), (_, after)) in g1_plain.iter().zip(&g1_concurrent) {
-        if !(name.starts_with("g1.blocks.") && name.ends_with(".conv.bias")) {
-            assert_ne!(before, after, "{name} did not train at scale 2");
-        }
-    }
-    let plain_whole = tmp.path().join("plain");
-    run_to_end(&plain, &data, &plain_whole);
-    assert_eq!(g1(&checkpoint_tensors(&plain_whole)), g1_plain);
-
-    // The checkpoint a kill leaves in scale 2 holds G_1's optimiser.
-    killed_in_scale_2_resumes_to(
-        &config,
-        &data,
-        &tmp.path().join("killed"),
-        "opt_g1.",
-        &finished,
-    );
-
-    // One scale at a time, or concurrent scales with G_1 kept frozen (micro's G_2 is its last
-    // 3D generator), is the paper's training.
-    let mut plain_tensors = checkpoint_tensors(&plain_whole);
-    plain_tensors.retain(|name, _| !name.starts_with("opt_"));
-    for (scales, first_scale) in [(1, 1), (2, 2)] {
-        let frozen = TrainConfig {
-            concurrent: Some(Concurrent {
-                scales,
-                learning_rate_scale: 0.5,
-                first_scale,
-            }),
-            ..plain.clone()
-        };
-        let dir = tmp.path().join(format!("frozen-{scales}-{first_scale}"));
-        run_to_end(&frozen, &data, &dir);
-        let mut tensors = checkpoint_tensors(&dir);
-        tensors.retain(|name, _| !name.starts_with("opt_"));
-        assert_same_tensors(&plain_tensors, &tensors);
-    }
-}
-
-/// Optimised reconstruction noise (`reconstruction_noise_lr > 0`): z*_2 moves from zero while
-/// scale 2 trains and the finished model reconstructs with it; its optimiser is in mid-scale
-/// checkpoints and a killed run resumes to the uninterrupted tensors; a checkpoint without it
-/// is refused naming the tensor; and without the setting nothing of it is saved.
 #[test]
 fn optimised_reconstruction_noise_trains_is_saved_and_resumes() {
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
-    let config = TrainConfig {
-        reconstruction_noise_lr: 0.05,
-        checkpoint_iterations: 2,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.noise.reconstruction_lr = 0.05;
+        c.run.checkpoint_iterations = 2;
+    });
     let whole = tmp.path().join("whole");
     let (model, _) = run_to_end(&config, &data, &whole);
     let finished = checkpoint_tensors(&whole);
@@ -1174,92 +1071,6 @@ fn optimised_reconstruction_noise_trains_is_saved_and_resumes() {
         .all(|name| name == "z_star" || !name.starts_with("z_star") && !name.starts_with("opt_z")));
 }
 
-/// A weight average (`generator_average > 0`) watches training without steering it: the raw
-/// weights of scale 1 are those of a run without it, and when the scale ends its generator
-/// takes the average, `d * (average before the last step) + (1 - d) * (last weights)`. The
-/// average is in mid-scale checkpoints and a killed run resumes to the uninterrupted tensors;
-/// a decay outside [0, 1) is refused naming the field.
-#[test]
-fn a_generator_weight_average_is_what_a_scale_keeps_and_resumes() {
-    let tmp = tempfile::tempdir().unwrap();
-    let data = dataset(&tmp.path().join("data"));
-    let decay = 0.5;
-    let config = TrainConfig {
-        generator_average: decay,
-        checkpoint_iterations: 1,
-        ..micro()
-    };
-    let last = config.scale_schedule(1).iterations;
-    // Killed right after the checkpoint of scale 1's second-to-last iteration.
-    let killed = tmp.path().join("killed");
-    let mut stop = |p: &Progress| match p.event {
-        Event::Checkpoint(_) if p.scale == 1 && p.iteration == last - 1 => Control::Stop,
-        _ => Control::Continue,
-    };
-    run_until_stopped(&config, &data, &killed, &mut stop);
-    let before_last = checkpoint_tensors(&killed);
-    let averaged = tmp.path().join("averaged");
-    run_to_end(&config, &data, &averaged);
-    let finished = checkpoint_tensors(&averaged);
-    let raw = tmp.path().join("raw");
-    run_to_end(
-        &TrainConfig {
-            checkpoint_iterations: 1,
-            ..micro()
-        },
-        &data,
-        &raw,
-    );
-    let raw = checkpoint_tensors(&raw);
-    let values = |t: &Tensor| -> Vec<f32> { t.flatten_all().unwrap().to_vec1().unwrap() };
-    let mut averaged_names = 0;
-    for (name, average) in before_last
-        .iter()
-        .filter(|(n, _)| n.starts_with("avg_g.1."))
-    {
-        let variable = format!("g1.{}", name.trim_start_matches("avg_g.1."));
-        let (kept, last_weights) = (values(&finished[&variable]), values(&raw[&variable]));
-        for ((k, a), w) in kept.iter().zip(values(average)).zip(last_weights) {
-            let expected = decay as f32 * a + (1.0 - decay as f32) * w;
-            assert!(
-                (k - expected).abs() <= 1e-6 * (1.0 + expected.abs()),
-                "{variable}"
-            );
-        }
-        averaged_names += 1;
-    }
-    assert!(
-        averaged_names > 0,
-        "no average of generator 1 in the mid-scale checkpoint"
-    );
-    // Scale 2 trains on the averaged scale 1, so it ends elsewhere.
-    assert_ne!(
-        values(&finished["g2.tail.weight"]),
-        values(&raw["g2.tail.weight"])
-    );
-    assert!(raw.keys().all(|name| !name.starts_with("avg_g.")));
-
-    // Checkpointing every iteration, the kill after scale 2's third leaves its second.
-    killed_in_scale_2_resumes_to(
-        &config,
-        &data,
-        &tmp.path().join("resumed"),
-        "avg_g.2.",
-        &finished,
-    );
-
-    for bad in [1.0, -0.1, f64::NAN] {
-        let config = TrainConfig {
-            generator_average: bad,
-            ..micro()
-        };
-        let message = config.validate().unwrap_err().to_string();
-        assert!(message.contains("generator_average"), "{message}");
-    }
-}
-
-/// The colour PSNR of `model`'s reconstruction rendered from every view of `data`, as `volgen
-/// eval` scores V*'s volume.
 fn reconstruction_volume_psnr(model: &SinGrav, data: &Dataset) -> f64 {
     let all: Vec<usize> = (0..data.len()).collect();
     let v_star = model.reconstruct().unwrap();
@@ -1283,10 +1094,9 @@ fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen(
         fitted_dir.join(CHECKPOINT_FILE),
     )
     .unwrap();
-    let config = TrainConfig {
-        reconstruction_fit_steps: 60,
-        ..micro()
-    };
+    let config = micro().with(|c| {
+        c.schedule.reconstruction_fit_steps = 60;
+    });
     let mut fit_events = 0;
     let mut observer = |p: &Progress| {
         if let Event::ReconstructionFitted { batch_psnr } = p.event {
@@ -1315,7 +1125,7 @@ fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen(
 
     let mut saved = checkpoint_tensors(&fitted_dir);
     let detail = saved.remove(RECONSTRUCTION_DETAIL_TENSOR).unwrap();
-    let s = *micro().volume_sizes.last().unwrap();
+    let s = *micro().pyramid.volume_sizes.last().unwrap();
     assert_eq!(detail.dims(), &[1, 4, s, s, s]);
     assert_same_tensors(&saved, &checkpoint_tensors(&plain_dir));
     let scene = |model: &SinGrav| -> Vec<f32> {
@@ -1339,10 +1149,9 @@ fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen(
         &checkpoint_tensors(&fitted_dir),
     );
 
-    let other = TrainConfig {
-        reconstruction_fit_steps: 30,
-        ..micro()
-    };
+    let other = micro().with(|c| {
+        c.schedule.reconstruction_fit_steps = 30;
+    });
     let err = train_error(&other, &data, &fitted_dir, &resume());
     assert!(err.contains("reconstruction_fit_steps"), "{err}");
     let wrong = Tensor::zeros((1, 4, 3, 3, 3), candle_core::DType::F32, &Device::Cpu).unwrap();

@@ -64,53 +64,6 @@ pub struct Outputs {
     pub opacity: bool,
 }
 
-/// How a sample between voxel centres gets its colour.
-///
-/// ```
-/// use volrender::{ColourInterpolation, RenderConfig};
-/// let cfg = RenderConfig::default().with_colour_interpolation(ColourInterpolation::DensityWeighted);
-/// assert_eq!(RenderConfig::default().colour_interpolation, ColourInterpolation::Separate);
-/// # let _ = cfg;
-/// ```
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum ColourInterpolation {
-    /// Colour is interpolated trilinearly on its own, like density (the paper's renderer and
-    /// most voxel renderers): a sample half-way between a dense grey voxel and an empty green
-    /// one is half as dense and grey-green, so the colours of empty voxels beside matter show.
-    #[default]
-    Separate,
-    /// Colour is the density-weighted mean of the corners' colours,
-    /// `c = sum_k w_k sigma_k c_k / sum_k w_k sigma_k` (premultiplied colour interpolated and
-    /// divided by the interpolated density; 0 where that density is at most 1e-30). Empty
-    /// voxels' colours then never show, and matter shows its own voxels' colour right up to
-    /// its edge. The backward is exact (`tests/gradients.rs` holds it to finite differences).
-    DensityWeighted,
-}
-
-impl ColourInterpolation {
-    /// The rule a yes/no switch names: `DensityWeighted` for `true`, `Separate` for `false`.
-    ///
-    /// ```
-    /// use volrender::ColourInterpolation;
-    /// assert_eq!(ColourInterpolation::density_weighted_if(true), ColourInterpolation::DensityWeighted);
-    /// assert!(!ColourInterpolation::density_weighted_if(false).is_density_weighted());
-    /// ```
-    #[must_use]
-    pub fn density_weighted_if(switch: bool) -> Self {
-        if switch {
-            Self::DensityWeighted
-        } else {
-            Self::Separate
-        }
-    }
-
-    /// Whether this is [`ColourInterpolation::DensityWeighted`].
-    #[must_use]
-    pub fn is_density_weighted(self) -> bool {
-        self == Self::DensityWeighted
-    }
-}
-
 /// What a sample's density is made of: the volume's channel 0 interpolated as it is, or
 /// interpolated raw values put through an activation at every sample.
 ///
@@ -133,8 +86,7 @@ pub enum DensityInterpolation {
     /// the interpolated raw value crosses the activation's knee inside a voxel, density jumps
     /// from nearly 0 to high within a fraction of the voxel, so a coarse grid holds sharp,
     /// sub-voxel surfaces. The gradient flows through the activation's slope
-    /// `scale * sigmoid(raw + shift)`. Not combinable with
-    /// [`ColourInterpolation::DensityWeighted`].
+    /// `scale * sigmoid(raw + shift)`.
     PostActivated {
         /// Multiplies the softplus, in 1/world-length (> 0).
         scale: f32,
@@ -208,8 +160,6 @@ pub struct RenderConfig {
     pub outputs: Outputs,
     /// The world box the volume's grid covers (default `[-1, 1]^3`).
     pub aabb: Aabb,
-    /// How samples interpolate colour (default: [`ColourInterpolation::Separate`]).
-    pub colour_interpolation: ColourInterpolation,
     /// What channel 0 holds and how samples get their density (default:
     /// [`DensityInterpolation::Physical`]).
     pub density: DensityInterpolation,
@@ -225,7 +175,6 @@ impl Default for RenderConfig {
             background: None,
             outputs: Outputs::default(),
             aabb: Aabb::CUBE,
-            colour_interpolation: ColourInterpolation::Separate,
             density: DensityInterpolation::Physical,
         }
     }
@@ -289,15 +238,6 @@ impl RenderConfig {
         Self { aabb, ..self }
     }
 
-    /// Sets how samples interpolate colour.
-    #[must_use]
-    pub fn with_colour_interpolation(self, colour_interpolation: ColourInterpolation) -> Self {
-        Self {
-            colour_interpolation,
-            ..self
-        }
-    }
-
     /// Sets what channel 0 holds and how samples get their density.
     #[must_use]
     pub fn with_density(self, density: DensityInterpolation) -> Self {
@@ -306,7 +246,7 @@ impl RenderConfig {
 
     /// Checks the options: at least one sample, `epsilon` in [0, 1), finite background, a valid
     /// box, at least one voxel per occupancy cell, and a post-activation of finite scale > 0 and
-    /// finite shift that is not combined with density-weighted colour.
+    /// finite shift.
     pub fn validate(&self) -> Result<()> {
         match self.sampler {
             Sampler::Uniform { samples: 0 } | Sampler::UniformLeft { samples: 0 } => {
@@ -354,13 +294,6 @@ impl RenderConfig {
                         "post-activation needs a finite scale > 0 and a finite shift, got scale \
                          {scale} and shift {shift}"
                     ),
-                ));
-            }
-            if self.colour_interpolation.is_density_weighted() {
-                return Err(invalid(
-                    "density",
-                    "post-activated density cannot be combined with density-weighted colour \
-                     (its weights are physical densities at the voxels)",
                 ));
             }
         }

@@ -72,8 +72,8 @@ pub use allocator::tune_malloc;
 pub use buffer_pool::release_gradient_buffers;
 pub use camera::{Camera, PAPER_FOV_DEG, PAPER_RADIUS};
 pub use config::{
-    ColourInterpolation, DensityInterpolation, Outputs, RenderConfig, Sampler, MAX_COORDINATE,
-    MAX_SAMPLES_PER_RAY, MAX_VOLUME_VALUE, MIN_DIRECTION_LENGTH,
+    DensityInterpolation, Outputs, RenderConfig, Sampler, MAX_COORDINATE, MAX_SAMPLES_PER_RAY,
+    MAX_VOLUME_VALUE, MIN_DIRECTION_LENGTH,
 };
 pub use error::{Error, Result};
 pub use image::{render_image, Image};

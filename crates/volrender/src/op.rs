@@ -247,14 +247,12 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             .contiguous_offsets()
             .ok_or_else(|| invalid("volumes", "expected a contiguous tensor"))?;
         let values = &T::cpu_storage_as_slice(cpu)?[start..end];
-        let density_weighted = cfg.colour_interpolation.is_density_weighted();
         let post_activation = cfg.density.post_activation();
         let volumes = interleave(
             values,
             rays.len(),
             channels,
             dims,
-            density_weighted,
             post_activation.is_some(),
         )?;
         let voxels = dims.voxel_count();
@@ -295,7 +293,6 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
             volume: VolumeView {
                 data: &self.volumes[b],
                 n: self.grid.n,
-                density_weighted: self.cfg.colour_interpolation.is_density_weighted(),
                 post_activation: self
                     .cfg
                     .density
@@ -336,9 +333,8 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
     }
 
     /// Returns the gradient `(N, C, D, H, W)` (planar, channels >= 4 zero) given the forward's
-    /// packed output and its gradient; `values` is the volume tensor's data, which the chain
-    /// rule through premultiplied colours needs (`None` when colours are not premultiplied).
-    fn backward(&self, res: &[T], grad: &[T], values: Option<&[T]>) -> Vec<T> {
+    /// packed output and its gradient.
+    fn backward(&self, res: &[T], grad: &[T]) -> Vec<T> {
         let voxels = self.dims.voxel_count();
         let mut out = vec![T::zero(); self.rays.len() * self.channels * voxels];
         let mut first_ray = 0;
@@ -387,10 +383,6 @@ impl<T: Pooled + WithDType> CompositeOp<T> {
                                 acc[c] += buf[v][c];
                             }
                         }
-                        if let Some(values) = values {
-                            let at = |c: usize| values[(b * self.channels + c) * voxels + v];
-                            acc = premultiplied_to_volume_gradient([0, 1, 2, 3].map(at), acc);
-                        }
                         (s[j], r[j], g[j], bl[j]) = (acc[0], acc[1], acc[2], acc[3]);
                     }
                 });
@@ -408,16 +400,13 @@ impl<T: Pooled> Drop for CompositeOp<T> {
 }
 
 /// Copies channels 0..4 of `n` planar `(C, D, H, W)` volumes into interleaved `[sigma, r, g, b]`
-/// per voxel (premultiplied, `[sigma, sigma r, sigma g, sigma b]`, when `density_weighted`),
-/// checking in the same pass that every value is finite, every density >= 0 (with
-/// `raw_density`, at most [`MAX_VOLUME_VALUE`] in magnitude instead) and every premultiplied
-/// colour finite.
+/// per voxel, checking in the same pass that every value is finite and every density >= 0
+/// (with `raw_density`, at most [`MAX_VOLUME_VALUE`] in magnitude instead).
 fn interleave<T: Pooled>(
     values: &[T],
     n: usize,
     channels: usize,
     dims: GridDims,
-    density_weighted: bool,
     raw_density: bool,
 ) -> Result<Vec<Vec<[T; 4]>>> {
     /// Voxels per parallel task.
@@ -434,20 +423,8 @@ fn interleave<T: Pooled>(
             x.abs() <= limit
         }
     };
-    let premultiply = |v: [T; 4]| {
-        if density_weighted {
-            [v[0], v[0] * v[1], v[0] * v[2], v[0] * v[3]]
-        } else {
-            v
-        }
-    };
-    // The first channel refused in voxel `v`, whose kernel values are `kept` (`4`: the
-    // premultiplied colour overflows).
-    let refused = |v: &[T; 4], kept: &[T; 4]| {
-        (0..4)
-            .find(|&c| !value_ok(c, v[c]))
-            .or_else(|| (density_weighted && !kept.iter().all(|x| x.is_finite())).then_some(4))
-    };
+    // The first channel refused in voxel `v`.
+    let refused = |v: &[T; 4]| (0..4).find(|&c| !value_ok(c, v[c]));
     (0..n)
         .map(|b| {
             let vol = &values[b * channels * voxels..(b * channels + 4) * voxels];
@@ -464,9 +441,8 @@ fn interleave<T: Pooled>(
                     });
                     let mut count = 0;
                     for (i, cell) in out.iter_mut().enumerate() {
-                        let v = planes.map(|p| p[i]);
-                        *cell = premultiply(v);
-                        count += usize::from(refused(&v, cell).is_some());
+                        *cell = planes.map(|p| p[i]);
+                        count += usize::from(refused(cell).is_some());
                     }
                     count
                 })
@@ -474,50 +450,28 @@ fn interleave<T: Pooled>(
             if count > 0 {
                 // (The buffer is not given back: errors are not the path to optimise.)
                 let (i, c) = (0..voxels)
-                    .find_map(|i| refused(&voxel(i), &premultiply(voxel(i))).map(|c| (i, c)))
+                    .find_map(|i| refused(&voxel(i)).map(|c| (i, c)))
                     .unwrap_or((0, 0));
                 let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
-                let first = if c < 4 {
-                    format!(
+                return Err(Error::InvalidVolume {
+                    count,
+                    first: format!(
                         "volume {b}, channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {:?}",
                         radiance_volume::BASE_CHANNELS[c],
                         voxel(i)[c]
-                    )
-                } else {
-                    format!(
-                        "volume {b}, voxel (d={z}, h={y}, w={x}): density x colour overflows \
-                         ({:?})",
-                        voxel(i)
-                    )
-                };
-                return Err(Error::InvalidVolume {
-                    count,
-                    first,
+                    ),
                     why: if raw_density {
                         "raw density (channel 0, post-activated) and colours must be finite \
                          and at most 1e10 in magnitude"
                     } else {
                         "density (channel 0) must be finite and >= 0, colours finite and at \
-                         most 1e10 in magnitude, and with density-weighted colour their \
-                         products finite"
+                         most 1e10 in magnitude"
                     },
                 });
             }
             Ok(data)
         })
         .collect()
-}
-
-/// The chain rule from a voxel's premultiplied values `[sigma, sigma c]` to the volume's own
-/// `[sigma, c]` (`voxel`): `d sigma += sum_k g_k c_k`, `d c_k = g_k sigma`.
-fn premultiplied_to_volume_gradient<T: Real>(voxel: [T; 4], g: [T; 4]) -> [T; 4] {
-    let sigma = voxel[0];
-    [
-        g[0] + g[1] * voxel[1] + g[2] * voxel[2] + g[3] * voxel[3],
-        g[1] * sigma,
-        g[2] * sigma,
-        g[3] * sigma,
-    ]
 }
 
 impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
@@ -553,12 +507,7 @@ impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {
     ) -> candle_core::Result<Option<Tensor>> {
         let res: Vec<T> = res.flatten_all()?.to_vec1()?;
         let grad: Vec<T> = grad_res.flatten_all()?.to_vec1()?;
-        let values: Option<Vec<T>> = if self.cfg.colour_interpolation.is_density_weighted() {
-            Some(arg.flatten_all()?.to_vec1()?)
-        } else {
-            None
-        };
-        let g = self.backward(&res, &grad, values.as_deref());
+        let g = self.backward(&res, &grad);
         Ok(Some(Tensor::from_vec(g, arg.shape(), arg.device())?))
     }
 }

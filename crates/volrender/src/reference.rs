@@ -17,9 +17,8 @@ use crate::op::{grid_spec, RenderOutput};
 use crate::rays::Rays;
 
 /// Renders `(C, D, H, W)` along `rays` with candle ops; supports the `Uniform` and `UniformLeft`
-/// samplers, both colour interpolations, both density rules, the background and both extra
-/// outputs (always returned), but neither early termination nor skipping (they do not change
-/// its result when `epsilon` is 0).
+/// samplers, both density rules, the background and both extra outputs (always returned), but
+/// neither early termination nor skipping (they do not change its result when `epsilon` is 0).
 ///
 /// ```
 /// use candle_core::{Device, Tensor, DType};
@@ -83,13 +82,7 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
     let t = Tensor::from_vec(ts, (r, m), dev)?.to_dtype(dtype)?;
     let dt = Tensor::from_vec(dts, (r, 1), dev)?.to_dtype(dtype)?;
 
-    let mut flat = volume.narrow(0, 0, 4)?.reshape((4, dims.voxel_count()))?;
-    let density_weighted = cfg.colour_interpolation.is_density_weighted();
-    if density_weighted {
-        let sigma = flat.narrow(0, 0, 1)?;
-        let premultiplied = flat.narrow(0, 1, 3)?.broadcast_mul(&sigma)?;
-        flat = Tensor::cat(&[&sigma, &premultiplied], 0)?;
-    }
+    let flat = volume.narrow(0, 0, 4)?.reshape((4, dims.voxel_count()))?;
     let values = flat
         .index_select(&idx, 1)?
         .broadcast_mul(&weights)?
@@ -110,18 +103,7 @@ pub fn render_reference(volume: &Tensor, rays: &Rays, cfg: &RenderConfig) -> Res
         let softplus = (x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?)?;
         sigma = ((softplus * f64::from(scale))? * inside)?;
     }
-    let mut rgb = values.narrow(0, 1, 3)?;
-    if density_weighted {
-        // The kernel's rule: colour P / sigma, 0 where sigma <= 1e-30.
-        let weighted = sigma.gt(1e-30)?;
-        let safe = weighted.where_cond(&sigma, &sigma.ones_like()?)?;
-        let quotient = rgb.broadcast_div(&safe.unsqueeze(0)?)?;
-        let zeros = quotient.zeros_like()?;
-        rgb = weighted
-            .unsqueeze(0)?
-            .broadcast_as(quotient.shape())?
-            .where_cond(&quotient, &zeros)?;
-    }
+    let rgb = values.narrow(0, 1, 3)?;
     let tau = sigma.broadcast_mul(&dt)?;
     let cum = tau.cumsum(1)?;
     let trans = (cum.clone() - &tau)?.neg()?.exp()?;

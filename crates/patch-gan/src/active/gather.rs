@@ -4,10 +4,10 @@
 use std::sync::Arc;
 
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
+use conv_kernels::Element;
 use rayon::prelude::*;
 
 use super::ActiveSites;
-use crate::element::Element;
 use crate::error::{invalid, Result};
 use crate::storage::{self, Kernel};
 

@@ -3,9 +3,10 @@
 
 use std::sync::Arc;
 
-use super::cpu::{self, chunk_columns, Chunk, Columns};
+use conv_kernels::im2col::{self, chunk_columns};
+use conv_kernels::{Chunk, Columns, Element};
+
 use crate::active::{ActiveSites, NO_SITE};
-use crate::element::Element;
 
 /// A convolution from `c_in` to `c_out` channels on the active sites: input and output
 /// `(1, C, M, 1, 1)`, kernel `(C_out, C_in, k, k, k)` with `k` the sites' kernel.
@@ -89,5 +90,5 @@ pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &ActiveGeometry
         c_out: g.c_in,
         sites: Arc::clone(&g.sites),
     };
-    cpu::forward(grad_out, &cpu::flipped_transposed(w, g), &transposed)
+    im2col::forward(grad_out, &im2col::flipped_transposed(w, g), &transposed)
 }

@@ -1,15 +1,12 @@
 //! Convolutions for candle with PyTorch's weight layout, names and init: [`Conv3d`] (which candle
 //! lacks) and [`Conv2d`] (faster on the CPU than candle's, and differentiable to any order), both
-//! on one chunked im2col + `gemm` CPU kernel.
+//! on the CPU kernels of `conv-kernels` (chunked im2col + `gemm`, and Winograd).
 
 mod active;
 mod conv2d;
 mod conv3d;
-mod cpu;
 pub(crate) mod op;
-mod scratch;
 mod slices;
-mod winograd;
 
 pub use conv2d::{conv2d, Conv2d};
 pub use conv3d::{conv3d, conv3d_no_bias, Conv3d};

@@ -8,13 +8,11 @@
 use std::sync::Arc;
 
 use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
+use conv_kernels::{im2col, winograd, Element, Geometry};
 
 use super::active::{self, ActiveGeometry};
-use super::cpu::{self, Geometry};
-use super::winograd;
 use super::ConvConfig;
 use crate::active::ActiveSites;
-use crate::element::Element;
 use crate::error::{invalid, Result};
 use crate::storage;
 
@@ -374,12 +372,12 @@ impl storage::Kernel for Kernel {
             Kernel::Forward(Grid(g)) if use_winograd(g) => winograd::forward(a, b, g),
             Kernel::GradInput(Grid(g)) if use_winograd(g) => winograd::grad_input(a, b, g),
             Kernel::GradWeight(Grid(g)) if use_winograd(g) => winograd::grad_weight(a, b, g),
-            Kernel::Forward(Grid(g)) => cpu::forward(a, b, g),
-            Kernel::GradInput(Grid(g)) => cpu::grad_input(a, b, g),
-            Kernel::GradWeight(Grid(g)) => cpu::grad_weight(a, b, g),
-            Kernel::Forward(Active(g)) => cpu::forward(a, b, g),
+            Kernel::Forward(Grid(g)) => im2col::forward(a, b, g),
+            Kernel::GradInput(Grid(g)) => im2col::grad_input(a, b, g),
+            Kernel::GradWeight(Grid(g)) => im2col::grad_weight(a, b, g),
+            Kernel::Forward(Active(g)) => im2col::forward(a, b, g),
             Kernel::GradInput(Active(g)) => active::grad_input(a, b, g),
-            Kernel::GradWeight(Active(g)) => cpu::grad_weight(a, b, g),
+            Kernel::GradWeight(Active(g)) => im2col::grad_weight(a, b, g),
         })
     }
 }

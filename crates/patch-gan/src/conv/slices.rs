@@ -1,8 +1,8 @@
 //! Conv3d from candle's own conv2d: the path for devices without our CPU kernel (CUDA).
 
 use candle_core::{Tensor, D};
+use conv_kernels::Geometry;
 
-use super::cpu::Geometry;
 use crate::error::{invalid, Result};
 
 /// `conv3d` as a sum over the kernel's depth taps of conv2d over depth slices: for tap `kd`,

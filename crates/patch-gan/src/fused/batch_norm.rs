@@ -5,18 +5,17 @@
 //! with `g` the incoming gradient masked by the activation's slope and `xh` the normalised input:
 //! `dbeta = sum g`, `dgamma = sum g xh` and, with batch statistics,
 //! `dx = gamma / sqrt(var + eps) (g - dbeta / M - xh dgamma / M)` over the `M` values of a channel
-//! (with running statistics the last two terms vanish). Second-order gradients through this op
-//! are not implemented (candle reports `BackwardNotSupported`): the generators, its users, are
-//! differentiated once.
+//! (with running statistics the last two terms vanish). The loops are `conv_kernels::fused`'s.
+//! Second-order gradients through this op are not implemented (candle reports
+//! `BackwardNotSupported`): the generators, its users, are differentiated once.
 
 use std::sync::{Arc, Mutex};
 
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor};
-use rayon::prelude::*;
+use conv_kernels::fused::{self, NormParams};
+use conv_kernels::Element;
 
-use super::{channels_and_plane, lane_sum, lane_sums, slope_at};
-use crate::element::Element;
-use crate::output::{extend_par_chunks, unwritten};
+use super::channels_and_plane;
 use crate::storage::{self, Kernel};
 
 /// Which statistics normalise the input.
@@ -61,10 +60,7 @@ pub(crate) fn batch_norm_act(
 /// What the forward pass leaves for the backward pass.
 #[derive(Debug, Clone)]
 struct Saved {
-    mean: Vec<f64>,
-    inv_std: Vec<f64>,
-    gamma: Vec<f64>,
-    beta: Vec<f64>,
+    params: NormParams,
     batch: Option<BatchStats>,
 }
 
@@ -109,7 +105,7 @@ impl BatchNormAct {
         let saved = lock(&self.saved)?
             .clone()
             .ok_or_else(|| candle_core::Error::Msg("batch-norm: backward before forward".into()))?;
-        let channels = saved.mean.len();
+        let channels = saved.params.channels();
         let backward = BatchNormActGrad {
             saved,
             batch: self.stats == NormStats::Batch,
@@ -133,33 +129,6 @@ impl BatchNormAct {
     }
 }
 
-/// Per-channel `(mean, biased variance)` of `x` `(N, C, plane)`, in f64.
-fn channel_stats<T: Element>(x: &[T], channels: usize, plane: usize) -> Vec<(f64, f64)> {
-    let batch = x.len() / (channels * plane);
-    let count = (batch * plane) as f64;
-    (0..channels)
-        .into_par_iter()
-        .map(|c| {
-            let planes = || (0..batch).map(move |n| &x[(n * channels + c) * plane..][..plane]);
-            let mean = planes().map(|p| lane_sum(p, |v| v.to_f64())).sum::<f64>() / count;
-            let var = planes()
-                .map(|p| lane_sum(p, |v| (v.to_f64() - mean).powi(2)))
-                .sum::<f64>()
-                / count;
-            (mean, var)
-        })
-        .collect()
-}
-
-/// The per-channel affine map `x -> x scale + shift` that normalises and applies gamma, beta.
-fn affine<T: Element>(s: &Saved, c: usize) -> (T, T) {
-    let scale = s.gamma[c] * s.inv_std[c];
-    (
-        T::from_f64(scale),
-        T::from_f64(s.beta[c] - s.mean[c] * scale),
-    )
-}
-
 /// The forward kernel for one input shape.
 struct ForwardKernel<'a> {
     op: &'a BatchNormAct,
@@ -174,7 +143,7 @@ impl Kernel for ForwardKernel<'_> {
         let (channels, plane) = (self.channels, self.plane);
         let (mean, var, batch) = match &self.op.stats {
             NormStats::Batch => {
-                let stats = channel_stats(x, channels, plane);
+                let stats = fused::channel_stats(x, channels, plane);
                 let (mean, var): (Vec<f64>, Vec<f64>) = stats.into_iter().unzip();
                 let batch = BatchStats {
                     mean: mean.clone(),
@@ -185,26 +154,14 @@ impl Kernel for ForwardKernel<'_> {
             }
             NormStats::Running { mean, var } => (mean.clone(), var.clone(), None),
         };
-        let saved = Saved {
+        let params = NormParams {
             inv_std: var.iter().map(|v| 1.0 / (v + self.op.eps).sqrt()).collect(),
             mean,
             gamma: self.gamma.clone(),
             beta: self.beta.clone(),
-            batch,
         };
-        let slope = T::from_f64(self.op.slope);
-        let mut out = unwritten(x.len());
-        // SAFETY: every chunk of `out` is written from the chunk of `x` of the same length.
-        unsafe {
-            extend_par_chunks(&mut out, x.len(), plane, |i, dst| {
-                let (scale, shift) = affine::<T>(&saved, i % channels);
-                for (d, &v) in dst.iter_mut().zip(&x[i * plane..]) {
-                    let pre = v * scale + shift;
-                    d.write(pre * slope_at(pre, slope));
-                }
-            })
-        };
-        *lock(&self.op.saved)? = Some(saved);
+        let out = fused::batch_norm_act(x, plane, &params, self.op.slope);
+        *lock(&self.op.saved)? = Some(Saved { params, batch });
         Ok(out)
     }
 }
@@ -280,69 +237,15 @@ struct BatchNormActGrad {
     plane: usize,
 }
 
-impl BatchNormActGrad {
-    /// Per channel: `(sum g, sum g xh)` with `g` the gradient through the activation.
-    fn sums<T: Element>(
-        &self,
-        x: &[T],
-        grad: &[T],
-        channels: usize,
-        plane: usize,
-    ) -> Vec<(f64, f64)> {
-        let batch = x.len() / (channels * plane);
-        let slope = T::from_f64(self.slope);
-        (0..channels)
-            .into_par_iter()
-            .map(|c| {
-                let (scale, shift) = affine::<T>(&self.saved, c);
-                let (mean, inv) = (self.saved.mean[c], self.saved.inv_std[c]);
-                let (mut sum_g, mut sum_gx) = (0.0, 0.0);
-                for n in 0..batch {
-                    let at = (n * channels + c) * plane;
-                    let (xs, gs) = (&x[at..][..plane], &grad[at..][..plane]);
-                    let masked = |v: T, g: T| (g * slope_at(v * scale + shift, slope)).to_f64();
-                    // Two sweeps: the compiler vectorises a single sum, not the pair of them.
-                    let [g] = lane_sums(xs, gs, |v, g| [masked(v, g)]);
-                    let [gx] = lane_sums(xs, gs, |v, g| [masked(v, g) * (v.to_f64() - mean) * inv]);
-                    sum_g += g;
-                    sum_gx += gx;
-                }
-                (sum_g, sum_gx)
-            })
-            .collect()
-    }
-}
-
 impl Kernel for BatchNormActGrad {
     fn run<T: Element>(&self, x: &[T], grad: &[T]) -> candle_core::Result<Vec<T>> {
-        let (channels, plane) = (self.saved.mean.len(), self.plane);
-        let sums = self.sums(x, grad, channels, plane);
-        let count = (x.len() / channels) as f64;
-        let slope = T::from_f64(self.slope);
-        let mut out = unwritten(x.len() + 2 * channels);
-        // SAFETY: every chunk of `out` is written from the chunks of `x` and `grad` of the same
-        // length.
-        unsafe {
-            extend_par_chunks(&mut out, x.len(), plane, |i, dst| {
-                let (xs, gs) = (&x[i * plane..], &grad[i * plane..]);
-                let c = i % channels;
-                let (scale, shift) = affine::<T>(&self.saved, c);
-                let (mean, inv) = (self.saved.mean[c], self.saved.inv_std[c]);
-                let k = self.saved.gamma[c] * inv;
-                // dx = k g - k sum_g / M - k xh sum_gx / M, with xh = (x - mean) inv.
-                let (sum_g, sum_gx) = if self.batch { sums[c] } else { (0.0, 0.0) };
-                let along_x = T::from_f64(-k * sum_gx / count * inv);
-                let offset = T::from_f64(-k * sum_g / count);
-                let (k, mean) = (T::from_f64(k), T::from_f64(mean));
-                for ((d, &v), &g) in dst.iter_mut().zip(xs).zip(gs) {
-                    let g = g * slope_at(v * scale + shift, slope);
-                    d.write(k * g + along_x * (v - mean) + offset);
-                }
-            })
-        };
-        out.extend(sums.iter().map(|&(_, sum_gx)| T::from_f64(sum_gx)));
-        out.extend(sums.iter().map(|&(sum_g, _)| T::from_f64(sum_g)));
-        Ok(out)
+        let stats_and_slope = (self.batch, self.slope);
+        Ok(fused::batch_norm_act_backward(
+            (x, grad),
+            self.plane,
+            &self.saved.params,
+            stats_and_slope,
+        ))
     }
 }
 
@@ -366,7 +269,7 @@ impl CustomOp2 for BatchNormActGrad {
                 l2.shape()
             );
         }
-        let len = l1.shape().elem_count() + 2 * self.saved.mean.len();
+        let len = l1.shape().elem_count() + 2 * self.saved.params.channels();
         Ok((
             storage::run_binary(self.name(), (s1, l1), (s2, l2), self)?,
             Shape::from(len),

@@ -1,10 +1,9 @@
 //! The sum over every axis but the channel axis, as a bias's gradient needs it.
 
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
-use rayon::prelude::*;
+use conv_kernels::{fused, Element};
 
-use super::{channels_and_plane, lane_sum};
-use crate::element::Element;
+use super::channels_and_plane;
 use crate::storage::{self, Kernel};
 
 /// `xs` `(N, C, ...)` summed to `(C,)` (f64 accumulation, one thread per channel): candle's
@@ -27,20 +26,7 @@ struct ChannelSumKernel {
 
 impl Kernel for ChannelSumKernel {
     fn run<T: Element>(&self, x: &[T], _: &[T]) -> candle_core::Result<Vec<T>> {
-        let (channels, plane) = (self.channels, self.plane);
-        let batch = x.len() / (channels * plane);
-        Ok((0..channels)
-            .into_par_iter()
-            .map(|c| {
-                let total: f64 = (0..batch)
-                    .map(|n| {
-                        let p = &x[(n * channels + c) * plane..][..plane];
-                        lane_sum(p, |v| v.to_f64())
-                    })
-                    .sum();
-                T::from_f64(total)
-            })
-            .collect())
+        Ok(fused::channel_sums(x, self.channels, self.plane))
     }
 }
 

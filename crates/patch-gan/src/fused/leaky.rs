@@ -1,14 +1,11 @@
 //! LeakyReLU and bias + LeakyReLU as custom ops whose gradients are themselves differentiable, as
 //! the WGAN-GP penalty (a gradient of the critic's input gradient) needs.
 
-use std::mem::MaybeUninit;
-
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Shape, Tensor};
+use conv_kernels::{fused, Element};
 
 use super::channel_sum::channel_sum;
-use super::{channels_and_plane, slope_at, CHUNK};
-use crate::element::Element;
-use crate::output::{extend_par_chunks, unwritten};
+use super::channels_and_plane;
 use crate::storage::{self, Kernel};
 
 /// `LeakyReLU(x) = x` for `x > 0`, else `negative_slope x`, element-wise; differentiable to any
@@ -94,35 +91,11 @@ pub(crate) fn leaky_grad(
         .apply_op2(&output.detach().contiguous()?, LeakyGrad(slope))
 }
 
-/// `len` values made [`CHUNK`] at a time in parallel: `fill(start, dst)` writes the values
-/// `start..start + dst.len()`. Plain loops over slices, like the other element-wise kernels:
-/// rayon's zipped `map` + `collect` wrote one value per call through its consumer.
-///
-/// # Safety
-/// `fill` must write every value of the chunk it is given.
-unsafe fn map_chunks<T: Element>(
-    len: usize,
-    fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync,
-) -> Vec<T> {
-    let mut out = unwritten(len);
-    // SAFETY: the caller's promise.
-    unsafe { extend_par_chunks(&mut out, len, CHUNK, |i, dst| fill(i * CHUNK, dst)) };
-    out
-}
-
 struct Leaky(f64);
 
 impl Kernel for Leaky {
     fn run<T: Element>(&self, x: &[T], _: &[T]) -> candle_core::Result<Vec<T>> {
-        let slope = T::from_f64(self.0);
-        // SAFETY: each chunk is zipped with the input from its start on, as long as the output.
-        Ok(unsafe {
-            map_chunks(x.len(), |start, dst| {
-                for (d, &v) in dst.iter_mut().zip(&x[start..]) {
-                    d.write(v * slope_at(v, slope));
-                }
-            })
-        })
+        Ok(fused::leaky_relu(x, self.0))
     }
 }
 
@@ -148,7 +121,6 @@ struct LeakyGrad(f64);
 
 impl Kernel for LeakyGrad {
     fn run<T: Element>(&self, grad: &[T], y: &[T]) -> candle_core::Result<Vec<T>> {
-        let slope = T::from_f64(self.0);
         if grad.len() != y.len() {
             candle_core::bail!(
                 "leaky-relu-grad: {} gradients for {} outputs",
@@ -156,14 +128,7 @@ impl Kernel for LeakyGrad {
                 y.len()
             );
         }
-        // SAFETY: each chunk is zipped with both inputs from its start on, as long as the output.
-        Ok(unsafe {
-            map_chunks(grad.len(), |start, dst| {
-                for ((d, &g), &y) in dst.iter_mut().zip(&grad[start..]).zip(&y[start..]) {
-                    d.write(g * slope_at(y, slope));
-                }
-            })
-        })
+        Ok(fused::leaky_relu_grad(grad, y, self.0))
     }
 }
 
@@ -208,28 +173,15 @@ impl CustomOp2 for LeakyGrad {
 /// `(x, bias) -> LeakyReLU(x + bias along axis 1)`.
 pub(super) struct BiasLeaky(pub(super) f64);
 
-/// The kernel of [`BiasLeaky`] for one input shape.
+/// The kernel of [`BiasLeaky`] for one input shape (its bias has one value per channel).
 struct BiasLeakyKernel {
     slope: f64,
-    channels: usize,
     plane: usize,
 }
 
 impl Kernel for BiasLeakyKernel {
     fn run<T: Element>(&self, x: &[T], bias: &[T]) -> candle_core::Result<Vec<T>> {
-        let slope = T::from_f64(self.slope);
-        let mut out = unwritten(x.len());
-        // SAFETY: every chunk of `out` is written from the chunk of `x` of the same length.
-        unsafe {
-            extend_par_chunks(&mut out, x.len(), self.plane, |i, dst| {
-                let b = bias[i % self.channels];
-                for (d, &v) in dst.iter_mut().zip(&x[i * self.plane..]) {
-                    let v = v + b;
-                    d.write(v * slope_at(v, slope));
-                }
-            })
-        };
-        Ok(out)
+        Ok(fused::bias_leaky_relu(x, bias, self.plane, self.slope))
     }
 }
 
@@ -256,7 +208,6 @@ impl CustomOp2 for BiasLeaky {
         }
         let kernel = BiasLeakyKernel {
             slope: self.0,
-            channels,
             plane,
         };
         Ok((

@@ -1,5 +1,6 @@
 //! Fused CPU ops for the element-wise work between convolutions: LeakyReLU (and its bias add),
-//! and BatchNorm with LeakyReLU, forward and backward each in one threaded sweep.
+//! and BatchNorm with LeakyReLU, forward and backward each in one threaded sweep (the kernels
+//! are `conv_kernels::fused`'s; these are the candle ops around them).
 //!
 //! Built from candle's own ops, LeakyReLU is five passes over the tensor (`zeros_like`,
 //! `maximum`, `minimum`, `affine`, `add`), each allocating, single-threaded, with a backward of
@@ -20,94 +21,6 @@ pub(crate) use conv_leaky::conv_bias_leaky;
 pub(crate) use conv_stack::{conv_norm_stack, StackBlock};
 pub(crate) use leaky::{bias_add, leaky_grad};
 pub use leaky::{bias_leaky_relu, leaky_relu};
-
-use crate::element::Element;
-
-/// Elements per parallel task of the element-wise kernels: large enough that rayon's overhead
-/// vanishes, small enough that two threads share the work evenly.
-const CHUNK: usize = 1 << 14;
-
-/// The factor LeakyReLU applies where the value that tells its branch is `v` (its input, or its
-/// output for the gradient): 1 for `v > 0`, else `slope`. Callers multiply by it: a select
-/// between two constants vectorises, where `if v > 0 { v } else { v * slope }` compiled to a
-/// branch per element, mispredicted on random signs (a quarter of the 28^3 generator step's
-/// profile was these kernels). `v * 1` is `v`, so the bits are the same.
-#[inline(always)]
-fn slope_at<T: Element>(v: T, slope: T) -> T {
-    if v > T::ZERO {
-        T::ONE
-    } else {
-        slope
-    }
-}
-
-/// Independent partial sums of [`lane_sums`].
-const SUM_LANES: usize = 8;
-
-/// `sum_i f(a_i, b_i)` in f64 over two equally long slices, for `K` sums at once, as eight
-/// interleaved partial sums (element `i` goes to lane `i % 8`) added at the end. One chain of
-/// f64 additions waits on the adder's latency at every element; eight independent ones do not.
-/// The order is fixed, so the bits do not depend on the thread count (nor on the CPU: the AVX2
-/// build, 4 f64 lanes instead of 2, gives the same bits).
-fn lane_sums<T: Element, const K: usize>(
-    a: &[T],
-    b: &[T],
-    f: impl Fn(T, T) -> [f64; K],
-) -> [f64; K] {
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::has_avx2() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { lane_sums_avx2(a, b, f) };
-    }
-    lane_sums_body(a, b, f)
-}
-
-/// [`lane_sums`] compiled for AVX2 (with `f` inlined into it).
-///
-/// # Safety
-/// The CPU must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn lane_sums_avx2<T: Element, const K: usize>(
-    a: &[T],
-    b: &[T],
-    f: impl Fn(T, T) -> [f64; K],
-) -> [f64; K] {
-    lane_sums_body(a, b, f)
-}
-
-/// The body of [`lane_sums`], compiled for whichever instruction set its caller is compiled for.
-#[inline(always)]
-fn lane_sums_body<T: Element, const K: usize>(
-    a: &[T],
-    b: &[T],
-    f: impl Fn(T, T) -> [f64; K],
-) -> [f64; K] {
-    let mut lanes = [[0f64; SUM_LANES]; K];
-    let (blocks_a, blocks_b) = (a.chunks_exact(SUM_LANES), b.chunks_exact(SUM_LANES));
-    let tail = blocks_a.remainder().iter().zip(blocks_b.remainder());
-    for (xa, xb) in blocks_a.zip(blocks_b) {
-        for lane in 0..SUM_LANES {
-            let v = f(xa[lane], xb[lane]);
-            for k in 0..K {
-                lanes[k][lane] += v[k];
-            }
-        }
-    }
-    let mut total = lanes.map(|l| l.iter().sum::<f64>());
-    for (&x, &y) in tail {
-        let v = f(x, y);
-        for k in 0..K {
-            total[k] += v[k];
-        }
-    }
-    total
-}
-
-/// `sum_i f(x_i)` over one slice, as [`lane_sums`].
-fn lane_sum<T: Element>(xs: &[T], f: impl Fn(T) -> f64) -> f64 {
-    lane_sums(xs, xs, |x, _| [f(x)])[0]
-}
 
 /// The `(channels, plane)` split of an `(N, C, ...)` tensor: `C` and the product of the axes after it.
 fn channels_and_plane(dims: &[usize]) -> (usize, usize) {
@@ -156,44 +69,6 @@ mod tests {
             let b = as_vec(of_plain.get(var).unwrap());
             assert_eq!(a, b, "{case}: gradient of {name}");
         }
-    }
-
-    #[test]
-    fn lane_sums_equal_plain_sums_for_every_tail_length() {
-        for len in 0..27 {
-            let a: Vec<f32> = (0..len).map(|i| (i as f32 * 0.37).sin()).collect();
-            let b: Vec<f32> = (0..len).map(|i| 1.0 + i as f32 / 8.0).collect();
-            let [s, sp] = lane_sums(&a, &b, |x, y| [x.to_f64(), x.to_f64() * y.to_f64()]);
-            let plain: f64 = a.iter().map(|&x| f64::from(x)).sum();
-            let products: f64 = a
-                .iter()
-                .zip(&b)
-                .map(|(&x, &y)| f64::from(x) * f64::from(y))
-                .sum();
-            assert!((s - plain).abs() < 1e-12, "len {len}: {s} vs {plain}");
-            assert!(
-                (sp - products).abs() < 1e-12,
-                "len {len}: {sp} vs {products}"
-            );
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn the_avx2_build_of_lane_sums_gives_the_same_bits() {
-        if !crate::simd::has_avx2() {
-            return;
-        }
-        let a: Vec<f32> = (0..1003).map(|i| (i as f32 * 0.37).sin()).collect();
-        let b: Vec<f32> = (0..1003).map(|i| 1.0 + (i as f32 * 0.11).cos()).collect();
-        let f = |x: f32, y: f32| {
-            let g = (y * slope_at(x, 0.2f32)).to_f64();
-            [g, g * (x.to_f64() - 0.3) * 1.7]
-        };
-        // SAFETY: the CPU has AVX2 (checked above).
-        let avx2 = unsafe { lane_sums_avx2(&a, &b, f) };
-        let body = lane_sums_body(&a, &b, f);
-        assert_eq!(avx2.map(f64::to_bits), body.map(f64::to_bits));
     }
 
     #[test]

@@ -38,7 +38,7 @@ impl SinGrav {
                 ),
             ));
         }
-        let finest = self.config().volume_sizes[last - 1];
+        let finest = self.config().pyramid.volume_sizes[last - 1];
         if edited.dims() != [1, 4, finest, finest, finest] {
             return Err(invalid(
                 "edited",

@@ -35,8 +35,8 @@ impl<const AXES: usize> Critic<AXES> {
     ) -> Result<Self> {
         let vars = VarMap::new();
         let cfg = PatchDiscriminatorConfig {
-            layers: config.layers,
-            channels: config.channels,
+            layers: config.pyramid.layers,
+            channels: config.pyramid.channels,
             in_channels,
         };
         let net = PatchDiscriminator::<AXES>::new(
@@ -47,7 +47,11 @@ impl<const AXES: usize> Critic<AXES> {
         if let Some(previous) = previous {
             copy_matching(previous, &vars)?;
         }
-        let opt = Adam::new(named_vars(&vars), config.learning_rate, config.betas)?;
+        let opt = Adam::new(
+            named_vars(&vars),
+            config.schedule.learning_rate,
+            config.schedule.betas,
+        )?;
         Ok(Self { net, vars, opt })
     }
 
@@ -88,7 +92,7 @@ impl<const AXES: usize> Critic<AXES> {
         Ok(patch_gan::generator_loss(&self.net.score(fake)?)?)
     }
 
-    /// The critic's part of an iteration: `config.d_steps` steps, each on the (real, fake)
+    /// The critic's part of an iteration: `config.schedule.d_steps` steps, each on the (real, fake)
     /// batches `batches` draws from `rng`; returns the mean critic loss and penalty.
     pub fn steps_on(
         &mut self,
@@ -97,19 +101,19 @@ impl<const AXES: usize> Critic<AXES> {
         mut batches: impl FnMut(&mut rand_chacha::ChaCha8Rng) -> Result<(Tensor, Tensor)>,
     ) -> Result<(f32, f32)> {
         let (mut critic_sum, mut penalty_sum) = (0.0, 0.0);
-        for _ in 0..config.d_steps {
+        for _ in 0..config.schedule.d_steps {
             let (real, fake) = batches(rng)?;
-            let (c, p) = self.step(&real, &fake, config.gp_weight, rng)?;
+            let (c, p) = self.step(&real, &fake, config.critics.gradient_penalty, rng)?;
             critic_sum += c;
             penalty_sum += p;
         }
-        let steps = config.d_steps as f32;
+        let steps = config.schedule.d_steps as f32;
         Ok((critic_sum / steps, penalty_sum / steps))
     }
 }
 
 impl Critic<2> {
-    /// The critic's part of an iteration: `config.d_steps` steps, each on `batch_views`
+    /// The critic's part of an iteration: `config.schedule.d_steps` steps, each on `batch_views`
     /// random real views against the fake batch `fake_batch(views)` of as many random views;
     /// returns the mean critic loss and penalty.
     pub fn steps(

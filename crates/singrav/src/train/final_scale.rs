@@ -9,13 +9,14 @@ use patch_gan::upsample_bilinear2x;
 use rand::Rng;
 use swd_loss::{TextureLoss, Vgg19};
 
+use rgbd_dataset::DatasetLevel;
+
 use super::critic::Critic;
-use super::run::{Stage, StageParts};
+use super::losses::{LossTerm, StepLosses, StepMeans, StepTerms};
+use super::stage::{Stage, StageParts};
 use super::texture::{texture_loss, SwdExtractor};
 use super::volume_scale::{mse, pick_views, select};
-use super::StepLosses;
 use crate::config::TrainConfig;
-use crate::dataset::DatasetLevel;
 use crate::error::Result;
 use crate::model::{named_vars, SinGrav};
 use crate::optim::Adam;
@@ -51,14 +52,18 @@ impl<'a> FinalScale<'a> {
         rng: &mut impl Rng,
     ) -> Result<Self> {
         let config = model.config();
-        let last = config.volume_sizes.len();
-        let renderer = ViewRenderer::new(config, config.samples[last - 1], 1.0, false);
+        let last = config.pyramid.volume_sizes.len();
+        let renderer = ViewRenderer::new(config, config.pyramid.samples[last - 1], 1.0, false);
         let real = Tensor::cat(&[&fine.images, &upsample_bilinear2x(&coarse.images)?], 1)?;
         let critic = Critic::new(config, real.dim(1)?, previous_critic, model.device(), rng)?;
         let vars = model
             .upsampler_vars()
             .ok_or_else(|| crate::error::invalid("scale", "the upsampler is not built"))?;
-        let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let opt = Adam::new(
+            named_vars(vars),
+            config.schedule.learning_rate,
+            config.schedule.betas,
+        )?;
         let frozen = model.generate(&model.reconstruction_noise(last)?)?.detach();
         let cameras: Vec<_> = coarse.cameras.iter().collect();
         let (reconstruction, _) = renderer.render(&frozen, &cameras)?;
@@ -80,7 +85,9 @@ impl<'a> FinalScale<'a> {
     /// A random raw volume of the frozen 3D pyramid (drawn once per iteration, as SinGAN
     /// draws noise once per iteration).
     fn fake_volume(&self, rng: &mut impl Rng) -> Result<Tensor> {
-        let noise = self.model.draw_noise(self.config.volume_sizes.len(), rng)?;
+        let noise = self
+            .model
+            .draw_noise(self.config.pyramid.volume_sizes.len(), rng)?;
         Ok(self.model.generate(&noise)?.detach())
     }
 
@@ -128,12 +135,12 @@ impl Stage for FinalScale<'_> {
                         let coarse = render_views(renderer, volume, cameras, views)?;
                         joint(&model.upsample_images(&coarse)?, &coarse)
                     })?;
-            losses.critic = Some(critic);
-            losses.penalty = Some(penalty);
+            losses.set(LossTerm::Critic, critic);
+            losses.set(LossTerm::Penalty, penalty);
         }
-        let (mut adversarial_sum, mut color_sum, mut swd_sum) = (0.0, 0.0, 0.0);
-        for _ in 0..self.config.g_steps {
-            let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
+        let mut means = StepMeans::new();
+        for _ in 0..self.config.schedule.g_steps {
+            let mut terms = StepTerms::new();
             if let Some(volume) = &fake_volume {
                 let fake_views = pick_views(
                     rng,
@@ -143,13 +150,11 @@ impl Stage for FinalScale<'_> {
                 let coarse = self.fake_rendering(volume, &fake_views)?;
                 let upsampled = self.model.upsample_images(&coarse)?;
                 let adv = self.critic.generator_loss(&joint(&upsampled, &coarse)?)?;
-                adversarial_sum += adv.to_scalar::<f32>()?;
-                total = (total + adv)?;
+                terms.add(LossTerm::Adversarial, adv);
                 if let Some(texture) = &self.texture {
                     let target = texture.target(&select(&self.fine.images, &fake_views)?)?;
-                    let swd = (texture.loss(&upsampled, &target, rng)? * self.config.lambda_swd)?;
-                    swd_sum += swd.to_scalar::<f32>()?;
-                    total = (total + swd)?;
+                    let swd = texture.loss(&upsampled, &target, rng)?;
+                    terms.add(LossTerm::Swd, (swd * self.config.losses.swd)?);
                 }
             }
             let rec_views = pick_views(
@@ -160,16 +165,16 @@ impl Stage for FinalScale<'_> {
             let rebuilt = self
                 .model
                 .upsample_images(&select(&self.reconstruction, &rec_views)?)?;
-            let color = (mse(&rebuilt, &select(&self.fine.images, &rec_views)?)?
-                * self.config.lambda_color)?;
-            color_sum += color.to_scalar::<f32>()?;
-            total = (total + color)?;
-            self.opt.step(&total.backward()?)?;
+            let real = select(&self.fine.images, &rec_views)?;
+            terms.add(
+                LossTerm::Colour,
+                (mse(&rebuilt, &real)? * self.config.losses.rgb)?,
+            );
+            means.add(&terms)?;
+            self.opt
+                .step(&terms.total(self.model.device())?.backward()?)?;
         }
-        let steps = self.config.g_steps as f32;
-        losses.color = color_sum / steps;
-        losses.adversarial = adversarial.then_some(adversarial_sum / steps);
-        losses.swd = (adversarial && self.texture.is_some()).then_some(swd_sum / steps);
+        means.write_into(&mut losses);
         Ok(losses)
     }
 
@@ -196,9 +201,7 @@ impl Stage for FinalScale<'_> {
             critic: &mut self.critic,
             volume_critic: None,
             generator_opt: &mut self.opt,
-            coarser_generators: &mut [],
             reconstruction_noise_opt: None,
-            generator_average: None,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! the training views, every network frozen, kept as the reconstruction's detail.
 //!
 //! The pyramid's V* is what one convolutional network per scale makes of the upsampled coarser
-//! volume, and that holds it below a direct fit of its own grid (docs/training.md, "Where V*'s
+//! volume, and that holds it below a direct fit of its own grid (docs/journal/2026-11-training-quality.md, "Where V*'s
 //! 3 dB go"); every recipe that pulled V* nearer during training cost the samples. Fitting
 //! after training gives V* a direct fit's per-voxel freedom, starting from what the pyramid
 //! made (so voxels no view sees keep the pyramid's values), without touching a generator.
@@ -10,10 +10,10 @@
 use radiance_volume::Aabb;
 use volrender::Sampler;
 
-use crate::dataset::Dataset;
 use crate::error::Result;
-use crate::fit::{fit_volume_from, FitBudget, FitConfig};
 use crate::{SinGrav, TrainConfig};
+use rgbd_dataset::Dataset;
+use volume_fit::{fit_volume_from, FitBudget, FitConfig};
 
 /// What the fit of the reconstruction did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,7 +24,7 @@ pub(super) struct ReconstructionFit {
     pub batch_psnr: f64,
 }
 
-/// The fit's settings for `config`'s finest 3D scale: [`FitConfig::for_training`]'s rates and
+/// The fit's settings for `config`'s finest 3D scale: [`TrainConfig::fit_config`]'s rates and
 /// renderer on the model's cube (the dataset is already in it), at that scale's own grid,
 /// without growth, with every voxel kept live so the fitted raw values render as the fit
 /// rendered them (the occupancy mask would empty voxels whose raw values stay), and training's
@@ -33,25 +33,25 @@ pub(super) struct ReconstructionFit {
 /// samples. A post-activated grid fitted at other sample positions than the model renders at
 /// can hold edges that only those positions see.
 fn fit_config(config: &TrainConfig, depth_norm: f32) -> FitConfig {
-    let size = config.volume_sizes.last().copied().unwrap_or(1);
+    let size = config.pyramid.volume_sizes.last().copied().unwrap_or(1);
     FitConfig {
         size,
         start_size: size,
-        budget: FitBudget::Steps(config.reconstruction_fit_steps),
+        budget: FitBudget::Steps(config.schedule.reconstruction_fit_steps),
         occupancy_every: 0,
         aabb: Aabb::CUBE,
-        lambda_color: config.lambda_color as f32,
-        lambda_opacity: config.lambda_opacity as f32,
-        lambda_depth: config.lambda_depth as f32 / (depth_norm * depth_norm),
+        lambda_color: config.losses.rgb as f32,
+        lambda_opacity: config.losses.opacity as f32,
+        lambda_depth: config.losses.depth as f32 / (depth_norm * depth_norm),
         sampler: Sampler::Uniform {
-            samples: config.samples.last().copied().unwrap_or(1),
+            samples: config.pyramid.samples.last().copied().unwrap_or(1),
         },
-        ..FitConfig::for_training(config)
+        ..config.fit_config()
     }
 }
 
 /// Fits `model`'s reconstruction to every view of `dataset` (in the model's cube) for
-/// `config.reconstruction_fit_steps` steps and sets the difference as its detail; `depth_norm`
+/// `config.schedule.reconstruction_fit_steps` steps and sets the difference as its detail; `depth_norm`
 /// is what training divides depth by.
 pub(super) fn fit_reconstruction(
     model: &mut SinGrav,

@@ -56,7 +56,7 @@ pub(super) fn load_vgg19(
     weights: Option<&Path>,
     device: &Device,
 ) -> Result<Option<Vgg19>> {
-    let wanted = config.use_swd && config.swd_features == SwdFeatures::Vgg19;
+    let wanted = config.ablations.use_swd && config.losses.swd_features == SwdFeatures::Vgg19;
     match (wanted, weights) {
         (false, None) => Ok(None),
         (false, Some(path)) => Err(invalid(
@@ -65,8 +65,8 @@ pub(super) fn load_vgg19(
                 "{} was given, but the configuration's SWD loss does not use VGG-19 features \
                  (use_swd = {}, swd_features = {:?})",
                 path.display(),
-                config.use_swd,
-                config.swd_features
+                config.ablations.use_swd,
+                config.losses.swd_features
             ),
         )),
         (true, None) => Err(invalid(
@@ -94,10 +94,10 @@ pub(super) fn texture_loss(
     config: &TrainConfig,
     vgg: Option<&Vgg19>,
 ) -> Result<Option<TextureLoss<SwdExtractor>>> {
-    if !config.use_swd {
+    if !config.ablations.use_swd {
         return Ok(None);
     }
-    let (extractor, slices) = match config.swd_features {
+    let (extractor, slices) = match config.losses.swd_features {
         SwdFeatures::Vgg19 => {
             let vgg =
                 vgg.ok_or_else(|| invalid("vgg19_weights", "VGG-19 weights are not loaded"))?;

@@ -8,19 +8,19 @@ use candle_core::{Tensor, D};
 use radiance_volume::RadianceVolume;
 use rand::Rng;
 
+use rgbd_dataset::DatasetLevel;
+
 use super::colour::{chroma_distribution_loss, colour_distribution_loss};
-use super::concurrent::CoarserGenerator;
 use super::critic::{Critic, VolumeCritic};
 use super::fitted::FittedTarget;
 use super::height_profile::height_profile_loss;
-use super::run::{Stage, StageParts};
-use super::sample_opacity::{opacity_binary_loss, opacity_distribution_loss};
-use super::StepLosses;
+use super::losses::{LossTerm, StepLosses, StepMeans, StepTerms};
+use super::sample_opacity::opacity_binary_loss;
+use super::stage::{Stage, StageParts};
 use crate::config::TrainConfig;
-use crate::dataset::DatasetLevel;
 use crate::error::Result;
 use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
-use crate::optim::{Adam, WeightAverage};
+use crate::optim::Adam;
 use crate::render::ViewRenderer;
 
 /// A loss on the samples' rendered opacity against the real views' alpha (both `(V, 1, h, w)`).
@@ -30,12 +30,11 @@ type OpacityLoss = fn(&Tensor, &Tensor) -> Result<Tensor>;
 /// random directions drawn from the generator.
 type ColourLoss = fn(&Tensor, &Tensor, &mut rand_chacha::ChaCha8Rng) -> Result<Tensor>;
 
-/// One iteration's random draw: the noise of the scales that train (this one, and with
-/// concurrent training the coarser ones that train with it) and the volume of the frozen scales
-/// below them. As in SinGAN, noise is drawn once per iteration: the critic steps see the same
+/// One iteration's random draw: the noise of this scale and the volume of the frozen scales
+/// below it. As in SinGAN, noise is drawn once per iteration: the critic steps see the same
 /// fake (here from different views) and the generator steps refine the same draw.
 struct Draw {
-    trained_noise: Vec<Tensor>,
+    noise: Tensor,
     frozen: Option<Tensor>,
 }
 
@@ -53,22 +52,16 @@ pub(super) struct VolumeScale<'a> {
     opt: Adam,
     /// The optimiser of this scale's reconstruction noise z*_n, when the run optimises it.
     noise_opt: Option<Adam>,
-    /// The coarser generators that train with this one (concurrent training), coarsest first.
-    coarser: Vec<CoarserGenerator>,
-    /// The reconstruction (raw) of the last frozen scale, below every generator that trains;
-    /// `None` when scale 1 trains.
+    /// The reconstruction V*_{n-1} (raw) of the frozen scales below; `None` when scale 1
+    /// trains.
     frozen_reconstruction: Option<Tensor>,
-    /// The reconstruction noise of the scales that train ({z*_1}, zeros, or this scale's
-    /// optimised z*_n).
-    reconstruction_noise: Vec<Tensor>,
+    /// This scale's reconstruction noise (z*_1, zeros, or the optimised z*_n).
+    reconstruction_noise: Tensor,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
     /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
     /// `fitted`.
     volume_critic: Option<VolumeCritic>,
-    /// The moving average of the weights of every generator that trains (runs with
-    /// `generator_average > 0`), which they keep when the scale ends.
-    average: Option<WeightAverage>,
 }
 
 /// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
@@ -97,9 +90,8 @@ fn masked_mse(a: &Tensor, b: &Tensor, mask: &Tensor) -> Result<Tensor> {
 }
 
 impl<'a> VolumeScale<'a> {
-    /// Sets up scale `n` (its generator already pushed onto `model`), and with concurrent
-    /// training the coarser generators that train with it, on top of the frozen scales' fixed
-    /// reconstruction.
+    /// Sets up scale `n` (its generator already pushed onto `model`) on top of the frozen
+    /// scales' fixed reconstruction.
     pub fn new(
         model: &'a SinGrav,
         n: usize,
@@ -109,32 +101,38 @@ impl<'a> VolumeScale<'a> {
         rng: &mut impl Rng,
     ) -> Result<Self> {
         let config = model.config();
-        let renderer =
-            ViewRenderer::new(config, config.samples[n - 1], depth_norm, config.use_depth)
-                .with_opacity(config.critic_opacity || config.lambda_opacity > 0.0);
+        let renderer = ViewRenderer::new(
+            config,
+            config.pyramid.samples[n - 1],
+            depth_norm,
+            config.ablations.use_depth,
+        )
+        .with_opacity(config.critics.opacity || config.losses.opacity > 0.0);
         let real = critic_input(config, &level, depth_norm)?;
         let in_channels = real.dim(1)?;
         let critic = Critic::new(config, in_channels, previous_critic, model.device(), rng)?;
         let vars = model
             .generator_vars(n)
             .ok_or_else(|| crate::error::invalid("scale", format!("generator {n} is not built")))?;
-        let opt = Adam::new(named_vars(vars), config.learning_rate, config.betas)?;
+        let opt = Adam::new(
+            named_vars(vars),
+            config.schedule.learning_rate,
+            config.schedule.betas,
+        )?;
         let noise_opt = model
             .reconstruction_noise_var(n)
             .map(|z| {
                 Adam::new(
                     vec![("z_star".into(), z.clone())],
-                    config.reconstruction_noise_lr,
-                    config.betas,
+                    config.noise.reconstruction_lr,
+                    config.schedule.betas,
                 )
             })
             .transpose()?;
-        let coarser = CoarserGenerator::for_scale(model, config, n)?;
-        let average = (config.generator_average > 0.0)
-            .then(|| trained_generator_average(model, n - coarser.len()..=n))
-            .transpose()?;
         let mut frozen_noise = model.reconstruction_noise(n)?;
-        let reconstruction_noise = frozen_noise.split_off(n - 1 - coarser.len());
+        let reconstruction_noise = frozen_noise
+            .pop()
+            .ok_or_else(|| crate::error::invalid("scale", format!("scale {n} has no noise")))?;
         let frozen_reconstruction = if frozen_noise.is_empty() {
             None
         } else {
@@ -150,12 +148,10 @@ impl<'a> VolumeScale<'a> {
             critic,
             opt,
             noise_opt,
-            coarser,
             frozen_reconstruction,
             reconstruction_noise,
             fitted: None,
             volume_critic: None,
-            average,
         })
     }
 
@@ -170,21 +166,21 @@ impl<'a> VolumeScale<'a> {
         previous_volume_critic: Option<&HashMap<String, Tensor>>,
         rng: &mut impl Rng,
     ) -> Result<Self> {
-        let size = self.config.volume_sizes[self.n - 1];
+        let size = self.config.pyramid.volume_sizes[self.n - 1];
         self.fitted = fitted
             .map(|volume| {
                 let density = self.config.density_interpolation();
                 FittedTarget::new(volume, size, density, self.model.device())
             })
             .transpose()?;
-        if self.config.lambda_volume_critic > 0.0 {
+        if self.config.losses.volume_critic > 0.0 {
             if self.fitted.is_none() {
                 return Err(crate::error::invalid(
-                    "lambda_volume_critic",
+                    "losses.volume_critic",
                     "the 3D critic judges against a fitted volume, and none was given",
                 ));
             }
-            let channels = if self.config.volume_critic_colour {
+            let channels = if self.config.critics.volume_colour {
                 VOLUME_CHANNELS
             } else {
                 1
@@ -200,51 +196,182 @@ impl<'a> VolumeScale<'a> {
         Ok(self)
     }
 
-    /// The first scale whose generator trains.
-    fn first_trained(&self) -> usize {
-        self.n - self.coarser.len()
-    }
-
     /// Draws fresh noise at every scale and runs the frozen scales on it.
     fn draw(&self, rng: &mut impl Rng) -> Result<Draw> {
         let mut noise = self.model.draw_noise(self.n, rng)?;
-        let trained_noise = noise.split_off(self.first_trained() - 1);
+        let own = noise
+            .pop()
+            .ok_or_else(|| crate::error::invalid("scale", "no 3D scale to generate"))?;
         let frozen = if noise.is_empty() {
             None
         } else {
             Some(self.model.generate(&noise)?.detach())
         };
-        Ok(Draw {
-            trained_noise,
-            frozen,
-        })
+        Ok(Draw { noise: own, frozen })
     }
 
-    /// The generators of the last `noise.len()` scales up to this one, run on `noise` on top
-    /// of the volume `frozen` of the scales below them: differentiable in those generators.
-    fn run_trained(&self, frozen: Option<&Tensor>, noise: &[Tensor]) -> Result<Tensor> {
-        let mut volume = frozen.cloned();
-        for (scale, z) in (self.n + 1 - noise.len()..).zip(noise) {
-            volume = Some(match volume {
-                None => self.model.coarsest(z)?,
-                Some(prev) => self.model.refine(scale, z, &prev)?,
-            });
+    /// This scale's generator on `noise` on top of the volume `frozen` of the scales below it:
+    /// differentiable in the generator.
+    fn run_generator(&self, frozen: Option<&Tensor>, noise: &Tensor) -> Result<Tensor> {
+        match frozen {
+            None => self.model.coarsest(noise),
+            Some(prev) => self.model.refine(self.n, noise, prev),
         }
-        volume.ok_or_else(|| crate::error::invalid("scale", "no 3D scale to generate"))
     }
 
-    /// The random volume of this scale for a draw, differentiable in the generators that train.
+    /// The random volume of this scale for a draw, differentiable in the generator.
     fn fake_volume(&self, draw: &Draw) -> Result<Tensor> {
-        self.run_trained(draw.frozen.as_ref(), &draw.trained_noise)
+        self.run_generator(draw.frozen.as_ref(), &draw.noise)
     }
 
-    /// The reconstruction V*_n from the reconstruction noise, differentiable in the generators
-    /// that train (and in this scale's z*_n when it is optimised).
+    /// The reconstruction V*_n from the reconstruction noise, differentiable in the generator
+    /// (and in this scale's z*_n when it is optimised).
     fn reconstruction(&self) -> Result<Tensor> {
-        self.run_trained(
+        self.run_generator(
             self.frozen_reconstruction.as_ref(),
             &self.reconstruction_noise,
         )
+    }
+
+    /// The critics' part of an iteration: the 3D critic's steps (runs with one) and the 2D
+    /// critic's, each against this draw's volume.
+    fn critic_steps(
+        &mut self,
+        draw: &Draw,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        losses: &mut StepLosses,
+    ) -> Result<()> {
+        let fake_volume = self.fake_volume(draw)?.detach();
+        if let (Some(critic), Some(fitted)) = (&mut self.volume_critic, &self.fitted) {
+            let colour = self.config.critics.volume_colour;
+            let real = fitted.features(colour)?;
+            let fake = fitted.volume_features(&fake_volume, &self.config.activation(), colour)?;
+            // One real volume and this iteration's one fake at every step.
+            let (critic, penalty) =
+                critic.steps_on(self.config, rng, |_| Ok((real.clone(), fake.clone())))?;
+            losses.set(LossTerm::VolumeCritic, critic);
+            losses.set(LossTerm::VolumePenalty, penalty);
+        }
+        let (renderer, cameras) = (&self.renderer, &self.level.cameras);
+        let channels = self.real.dim(1)?;
+        let batch = self.config.views(self.n).generated;
+        let (critic, penalty) =
+            self.critic
+                .steps(self.config, batch, &self.real, rng, |views| {
+                    let cams: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
+                    critic_view(renderer, &fake_volume, &cams, channels)
+                })?;
+        losses.set(LossTerm::Critic, critic);
+        losses.set(LossTerm::Penalty, penalty);
+        Ok(())
+    }
+
+    /// A generator step's terms on a sample of this draw: the adversarial terms, then the
+    /// distributions of its colours and of its rendered opacity against the real views'.
+    fn sample_terms(
+        &self,
+        draw: &Draw,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        terms: &mut StepTerms,
+    ) -> Result<()> {
+        let losses = &self.config.losses;
+        let fake_views = pick_views(rng, self.views(), self.config.views(self.n).generated);
+        let fake_volume = self.fake_volume(draw)?;
+        if let (Some(critic), Some(fitted)) = (&self.volume_critic, &self.fitted) {
+            let features = fitted.volume_features(
+                &fake_volume,
+                &self.config.activation(),
+                self.config.critics.volume_colour,
+            )?;
+            let loss = (critic.generator_loss(&features)? * losses.volume_critic)?;
+            terms.add(LossTerm::VolumeAdversarial, loss);
+        }
+        let fake = critic_view(
+            &self.renderer,
+            &fake_volume,
+            &self.cameras(&fake_views),
+            self.real.dim(1)?,
+        )?;
+        terms.add(LossTerm::Adversarial, self.critic.generator_loss(&fake)?);
+        let colour_terms: [(LossTerm, f64, ColourLoss); 2] = [
+            (
+                LossTerm::ColourDistribution,
+                losses.colour_distribution,
+                colour_distribution_loss,
+            ),
+            (
+                LossTerm::ChromaDistribution,
+                losses.chroma_distribution,
+                chroma_distribution_loss,
+            ),
+        ];
+        if colour_terms.iter().any(|(_, weight, _)| *weight > 0.0) {
+            let colour = fake.narrow(1, 0, 3)?;
+            let real = select(&self.level.images, &fake_views)?;
+            for (term, weight, loss) in colour_terms {
+                if weight > 0.0 {
+                    terms.add(term, (loss(&colour, &real, rng)? * weight)?);
+                }
+            }
+        }
+        let opacity_terms: [(LossTerm, f64, OpacityLoss); 2] = [
+            (
+                LossTerm::HeightProfile,
+                losses.height_profile,
+                height_profile_loss,
+            ),
+            (
+                LossTerm::OpacityBinary,
+                losses.opacity_binary,
+                |opacity, _| opacity_binary_loss(opacity),
+            ),
+        ];
+        if opacity_terms.iter().any(|(_, weight, _)| *weight > 0.0) {
+            // Validation keeps these weights at 0 unless the critics' views end with the
+            // rendered opacity.
+            let opacity = fake.narrow(1, fake.dim(1)? - 1, 1)?;
+            let alpha = select(&self.level.opacity, &fake_views)?;
+            for (term, weight, loss) in opacity_terms {
+                if weight > 0.0 {
+                    terms.add(term, (loss(&opacity, &alpha)? * weight)?);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A generator step's terms on the reconstruction V*_n: against the fitted volume (runs
+    /// with one), then its renderings' opacity, colour and depth against the real views'.
+    fn reconstruction_terms(
+        &self,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        terms: &mut StepTerms,
+    ) -> Result<()> {
+        let losses = &self.config.losses;
+        let rec_views = pick_views(rng, self.views(), self.config.views(self.n).reconstruction);
+        let reconstruction = self.reconstruction()?;
+        if let (Some(fitted), true) = (&self.fitted, losses.fitted > 0.0) {
+            let loss = fitted.loss(&reconstruction, &self.config.activation())?;
+            terms.add(LossTerm::Fitted, (loss * losses.fitted)?);
+        }
+        let maps = self
+            .renderer
+            .render_all(&reconstruction, &self.cameras(&rec_views))?;
+        if let (Some(opacity), true) = (&maps.opacity, losses.opacity > 0.0) {
+            let alpha = select(&self.level.opacity, &rec_views)?;
+            terms.add(LossTerm::Opacity, (mse(opacity, &alpha)? * losses.opacity)?);
+        }
+        let real = select(&self.level.images, &rec_views)?;
+        terms.add(LossTerm::Colour, (mse(&maps.rgb, &real)? * losses.rgb)?);
+        if let Some(depth) = maps.depth {
+            let real_depth = select(&self.real, &rec_views)?.narrow(1, 3, 1)?;
+            let error = match &self.level.depth_mask {
+                None => mse(&depth, &real_depth)?,
+                Some(mask) => masked_mse(&depth, &real_depth, &select(mask, &rec_views)?)?,
+            };
+            terms.add(LossTerm::Depth, (error * losses.depth)?);
+        }
+        Ok(())
     }
 
     fn views(&self) -> usize {
@@ -263,169 +390,29 @@ impl Stage for VolumeScale<'_> {
         rng: &mut rand_chacha::ChaCha8Rng,
     ) -> Result<StepLosses> {
         let mut losses = StepLosses::default();
-        let views = self.views();
         let draw = if adversarial {
             Some(self.draw(rng)?)
         } else {
             None
         };
         if let Some(draw) = &draw {
-            let fake_volume = self.fake_volume(draw)?.detach();
-            if let (Some(critic), Some(fitted)) = (&mut self.volume_critic, &self.fitted) {
-                let colour = self.config.volume_critic_colour;
-                let real = fitted.features(colour)?;
-                let fake =
-                    fitted.volume_features(&fake_volume, &self.config.activation(), colour)?;
-                // One real volume and this iteration's one fake at every step.
-                let (critic, penalty) =
-                    critic.steps_on(self.config, rng, |_| Ok((real.clone(), fake.clone())))?;
-                losses.volume_critic = Some(critic);
-                losses.volume_penalty = Some(penalty);
-            }
-            let (renderer, cameras) = (&self.renderer, &self.level.cameras);
-            let channels = self.real.dim(1)?;
-            let batch = self.config.views(self.n).generated;
-            let (critic, penalty) =
-                self.critic
-                    .steps(self.config, batch, &self.real, rng, |views| {
-                        let cams: Vec<_> = views.iter().map(|&v| &cameras[v]).collect();
-                        critic_view(renderer, &fake_volume, &cams, channels)
-                    })?;
-            losses.critic = Some(critic);
-            losses.penalty = Some(penalty);
+            self.critic_steps(draw, rng, &mut losses)?;
         }
-        let (mut adversarial_sum, mut color_sum, mut depth_sum) = (0.0, 0.0, 0.0);
-        let (mut fitted_sum, mut opacity_sum, mut volume_adversarial_sum) = (0.0, 0.0, 0.0);
-        // The distribution terms on the samples' colours, each with its weight.
-        let colour_terms: [(f64, ColourLoss); 2] = [
-            (self.config.lambda_colour, colour_distribution_loss),
-            (self.config.lambda_chroma, chroma_distribution_loss),
-        ];
-        let mut colour_sums = [0.0f32; 2];
-        // The terms on the samples' rendered opacity, each with its weight at this scale.
-        let opacity_terms: [(f64, OpacityLoss); 3] = [
-            (self.config.lambda_height_profile, height_profile_loss),
-            (self.config.opacity_binary_weight(self.n), |opacity, _| {
-                opacity_binary_loss(opacity)
-            }),
-            (
-                self.config.lambda_opacity_distribution,
-                opacity_distribution_loss,
-            ),
-        ];
-        let mut opacity_sums = [0.0f32; 3];
-        for _ in 0..self.config.g_steps {
-            let mut total = Tensor::zeros((), candle_core::DType::F32, self.model.device())?;
+        let mut means = StepMeans::new();
+        for _ in 0..self.config.schedule.g_steps {
+            let mut terms = StepTerms::new();
             if let Some(draw) = &draw {
-                let fake_views = pick_views(rng, views, self.config.views(self.n).generated);
-                let fake_volume = self.fake_volume(draw)?;
-                if let (Some(critic), Some(fitted)) = (&self.volume_critic, &self.fitted) {
-                    let features = fitted.volume_features(
-                        &fake_volume,
-                        &self.config.activation(),
-                        self.config.volume_critic_colour,
-                    )?;
-                    let loss =
-                        (critic.generator_loss(&features)? * self.config.lambda_volume_critic)?;
-                    volume_adversarial_sum += loss.to_scalar::<f32>()?;
-                    total = (total + loss)?;
-                }
-                let fake = critic_view(
-                    &self.renderer,
-                    &fake_volume,
-                    &self.cameras(&fake_views),
-                    self.real.dim(1)?,
-                )?;
-                let adv = self.critic.generator_loss(&fake)?;
-                adversarial_sum += adv.to_scalar::<f32>()?;
-                total = (total + adv)?;
-                if colour_terms.iter().any(|(weight, _)| *weight > 0.0) {
-                    let (colour, real) = (
-                        fake.narrow(1, 0, 3)?,
-                        select(&self.level.images, &fake_views)?,
-                    );
-                    for ((weight, loss), sum) in colour_terms.iter().zip(&mut colour_sums) {
-                        if *weight > 0.0 {
-                            let loss = (loss(&colour, &real, rng)? * *weight)?;
-                            *sum += loss.to_scalar::<f32>()?;
-                            total = (total + loss)?;
-                        }
-                    }
-                }
-                if opacity_terms.iter().any(|(weight, ..)| *weight > 0.0) {
-                    // Validation keeps these weights at 0 unless the critics' views end with
-                    // the rendered opacity.
-                    let opacity = fake.narrow(1, fake.dim(1)? - 1, 1)?;
-                    let alpha = select(&self.level.opacity, &fake_views)?;
-                    for ((weight, loss), sum) in opacity_terms.iter().zip(&mut opacity_sums) {
-                        if *weight > 0.0 {
-                            let loss = (loss(&opacity, &alpha)? * *weight)?;
-                            *sum += loss.to_scalar::<f32>()?;
-                            total = (total + loss)?;
-                        }
-                    }
-                }
+                self.sample_terms(draw, rng, &mut terms)?;
             }
-            let rec_views = pick_views(rng, views, self.config.views(self.n).reconstruction);
-            let reconstruction = self.reconstruction()?;
-            if let (Some(fitted), true) = (&self.fitted, self.config.lambda_fitted > 0.0) {
-                let loss = (fitted.loss(&reconstruction, &self.config.activation())?
-                    * self.config.lambda_fitted)?;
-                fitted_sum += loss.to_scalar::<f32>()?;
-                total = (total + loss)?;
-            }
-            let maps = self
-                .renderer
-                .render_all(&reconstruction, &self.cameras(&rec_views))?;
-            let (rgb, depth) = (maps.rgb, maps.depth);
-            if let (Some(opacity), true) = (&maps.opacity, self.config.lambda_opacity > 0.0) {
-                let alpha = select(&self.level.opacity, &rec_views)?;
-                let loss = (mse(opacity, &alpha)? * self.config.lambda_opacity)?;
-                opacity_sum += loss.to_scalar::<f32>()?;
-                total = (total + loss)?;
-            }
-            let color =
-                (mse(&rgb, &select(&self.level.images, &rec_views)?)? * self.config.lambda_color)?;
-            color_sum += color.to_scalar::<f32>()?;
-            total = (total + color)?;
-            if let Some(depth) = depth {
-                let real_depth = select(&self.real, &rec_views)?.narrow(1, 3, 1)?;
-                let error = match &self.level.depth_mask {
-                    None => mse(&depth, &real_depth)?,
-                    Some(mask) => masked_mse(&depth, &real_depth, &select(mask, &rec_views)?)?,
-                };
-                let depth = (error * self.config.lambda_depth)?;
-                depth_sum += depth.to_scalar::<f32>()?;
-                total = (total + depth)?;
-            }
-            let grads = total.backward()?;
+            self.reconstruction_terms(rng, &mut terms)?;
+            means.add(&terms)?;
+            let grads = terms.total(self.model.device())?.backward()?;
             self.opt.step(&grads)?;
             if let Some(opt) = &mut self.noise_opt {
                 opt.step(&grads)?;
             }
-            for coarser in &mut self.coarser {
-                coarser.opt.step(&grads)?;
-            }
-            if let Some(average) = &mut self.average {
-                average.update()?;
-            }
         }
-        let steps = self.config.g_steps as f32;
-        losses.color = color_sum / steps;
-        losses.depth = self.config.use_depth.then_some(depth_sum / steps);
-        losses.adversarial = adversarial.then_some(adversarial_sum / steps);
-        losses.fitted = (self.fitted.is_some() && self.config.lambda_fitted > 0.0)
-            .then_some(fitted_sum / steps);
-        losses.volume_adversarial =
-            (adversarial && self.volume_critic.is_some()).then_some(volume_adversarial_sum / steps);
-        losses.opacity = (self.config.lambda_opacity > 0.0).then_some(opacity_sum / steps);
-        // A sample term's mean, reported when it acted: in adversarial iterations, weighted.
-        let reported = |weight: f64, sum: f32| (adversarial && weight > 0.0).then_some(sum / steps);
-        losses.colour_distribution = reported(colour_terms[0].0, colour_sums[0]);
-        losses.chroma_distribution = reported(colour_terms[1].0, colour_sums[1]);
-        losses.height_profile = reported(opacity_terms[0].0, opacity_sums[0]);
-        losses.opacity_binary = reported(opacity_terms[1].0, opacity_sums[1]);
-        losses.opacity_distribution = reported(opacity_terms[2].0, opacity_sums[2]);
+        means.write_into(&mut losses);
         Ok(losses)
     }
 
@@ -449,43 +436,14 @@ impl Stage for VolumeScale<'_> {
         Ok(vec![row])
     }
 
-    fn finish(&mut self) -> Result<()> {
-        match &self.average {
-            Some(average) => average.apply(),
-            None => Ok(()),
-        }
-    }
-
     fn parts(&mut self) -> StageParts<'_> {
         StageParts {
             critic: &mut self.critic,
             volume_critic: self.volume_critic.as_mut(),
             generator_opt: &mut self.opt,
-            coarser_generators: &mut self.coarser,
             reconstruction_noise_opt: self.noise_opt.as_mut(),
-            generator_average: self.average.as_mut(),
         }
     }
-}
-
-/// The weight average of the generators of `scales` (names `{scale}.{variable}`), with the
-/// configuration's decay.
-fn trained_generator_average(
-    model: &SinGrav,
-    scales: std::ops::RangeInclusive<usize>,
-) -> Result<WeightAverage> {
-    let mut params = Vec::new();
-    for scale in scales {
-        let vars = model.generator_vars(scale).ok_or_else(|| {
-            crate::error::invalid("scale", format!("generator {scale} is not built"))
-        })?;
-        params.extend(
-            named_vars(vars)
-                .into_iter()
-                .map(|(name, var)| (format!("{scale}.{name}"), var)),
-        );
-    }
-    WeightAverage::new(params, model.config().generator_average)
 }
 
 /// The RMSE between renderings of `volume` and the level's images over up to `max_views`
@@ -525,8 +483,8 @@ fn critic_view(
 fn critic_input(config: &TrainConfig, level: &DatasetLevel, depth_norm: f32) -> Result<Tensor> {
     let depth = (&level.depths / f64::from(depth_norm))?;
     let channels: Vec<&Tensor> = std::iter::once(&level.images)
-        .chain(config.use_depth.then_some(&depth))
-        .chain(config.critic_opacity.then_some(&level.opacity))
+        .chain(config.ablations.use_depth.then_some(&depth))
+        .chain(config.critics.opacity.then_some(&level.opacity))
         .collect();
     Ok(Tensor::cat(&channels, 1)?)
 }
@@ -542,7 +500,7 @@ mod tests {
 
     use super::{critic_input, masked_mse};
     use crate::config::TrainConfig;
-    use crate::dataset::DatasetLevel;
+    use rgbd_dataset::DatasetLevel;
 
     #[test]
     fn critic_input_stacks_colour_depth_and_alpha_as_configured() {
@@ -568,20 +526,17 @@ mod tests {
         let both = TrainConfig::preset("micro").unwrap();
         // Colour, depth / depth_norm, alpha.
         assert_eq!(channel_means(&both), [0.25, 0.25, 0.25, 0.5, 0.5]);
-        let no_depth = TrainConfig {
-            use_depth: false,
-            ..both.clone()
-        };
+        let no_depth = both.clone().with(|c| {
+            c.ablations.use_depth = false;
+        });
         assert_eq!(channel_means(&no_depth), [0.25, 0.25, 0.25, 0.5]);
-        let paper_like = TrainConfig {
-            critic_opacity: false,
-            ..both
-        };
+        let paper_like = both.with(|c| {
+            c.critics.opacity = false;
+        });
         assert_eq!(channel_means(&paper_like), [0.25, 0.25, 0.25, 0.5]);
-        let colour_only = TrainConfig {
-            use_depth: false,
-            ..paper_like
-        };
+        let colour_only = paper_like.with(|c| {
+            c.ablations.use_depth = false;
+        });
         assert_eq!(channel_means(&colour_only), [0.25, 0.25, 0.25]);
     }
 

@@ -1,8 +1,8 @@
 //! `volrender/composite_fwd` and `volrender/composite_fwdbwd`: grids 32/64/128, 64 and 128
 //! samples, dense and sparse scenes, skipping off and on, 1 and 2 threads, on the peer's camera
-//! with 4096 rays; and with density-weighted colour (`-weighted`) and post-activated density
-//! (`-post`: the same scene's densities as raw values under `25 softplus(raw - 4)`, empty voxels
-//! far below the knee) on both scenes at grid 64, 128 samples, 2 threads, skipping off and on.
+//! with 4096 rays; and with post-activated density (`-post`: the same scene's densities as raw
+//! values under `25 softplus(raw - 4)`, empty voxels far below the knee) on both scenes at grid
+//! 64, 128 samples, 2 threads, skipping off and on.
 //! Throughput is samples (rays x samples per ray), so criterion reports samples/s; rays/s is
 //! that divided by the samples per ray.
 
@@ -10,20 +10,18 @@ use candle_core::{Tensor, Var};
 use criterion::{BenchmarkId, Criterion, Throughput};
 use radiance_volume::Activation;
 use volrender::scenes::{make_scene, peer_rays, Scene};
-use volrender::{render, ColourInterpolation, DensityInterpolation, Rays, RenderConfig, Sampler};
+use volrender::{render, DensityInterpolation, Rays, RenderConfig, Sampler};
 
 const RAYS: usize = 4096;
 /// The post-activated cases' activation: the training presets'.
 const SCALE: f32 = 25.0;
 const SHIFT: f32 = -4.0;
 
-/// How samples get colour and density.
+/// How samples get density.
 #[derive(Clone, Copy, PartialEq)]
 enum Rule {
-    /// Both interpolated as they are (the paper's renderer).
+    /// Interpolated as it is, like colour (the paper's renderer).
     Paper,
-    /// Density-weighted colour.
-    Weighted,
     /// Raw density, activated per sample.
     PostActivated,
 }
@@ -44,13 +42,12 @@ impl Case {
             Scene::Sparse => "sparse",
         };
         let skip = if self.skip { "skip" } else { "noskip" };
-        let colour = match self.rule {
+        let rule = match self.rule {
             Rule::Paper => "",
-            Rule::Weighted => "-weighted",
             Rule::PostActivated => "-post",
         };
         format!(
-            "{scene}-g{}-m{}-{skip}-t{}{colour}",
+            "{scene}-g{}-m{}-{skip}-t{}{rule}",
             self.grid, self.samples, self.threads
         )
     }
@@ -75,17 +72,15 @@ fn cases() -> Vec<Case> {
                 }
             }
         }
-        for rule in [Rule::Weighted, Rule::PostActivated] {
-            for skip in [false, true] {
-                out.push(Case {
-                    scene,
-                    grid: 64,
-                    samples: 128,
-                    skip,
-                    threads: 2,
-                    rule,
-                });
-            }
+        for skip in [false, true] {
+            out.push(Case {
+                scene,
+                grid: 64,
+                samples: 128,
+                skip,
+                threads: 2,
+                rule: Rule::PostActivated,
+            });
         }
     }
     out
@@ -145,9 +140,6 @@ fn bench(c: &mut Criterion, backward: bool) {
                 samples: case.samples,
             })
             .with_skip_empty(case.skip)
-            .with_colour_interpolation(ColourInterpolation::density_weighted_if(
-                case.rule == Rule::Weighted,
-            ))
             .with_density(if case.rule == Rule::PostActivated {
                 DensityInterpolation::PostActivated {
                     scale: SCALE,

@@ -51,37 +51,6 @@ pub(crate) struct Chunk<T> {
     pub(crate) keep: [T; LANES],
 }
 
-/// Interpolated densities at or below this give a density-weighted sample colour 0 instead of a
-/// quotient of two values near underflow (such a sample's weight in the image is below 1e-30).
-const MIN_WEIGHTING_DENSITY: f64 = 1e-30;
-
-/// `[sigma, P] -> [sigma, P / sigma]`: a density-weighted sample's colour from its interpolated
-/// density and premultiplied colour.
-#[inline(always)]
-fn unpremultiply<T: Real>(v: [T; 4]) -> [T; 4] {
-    let sigma = v[0];
-    if sigma > T::of(MIN_WEIGHTING_DENSITY) {
-        [sigma, v[1] / sigma, v[2] / sigma, v[3] / sigma]
-    } else {
-        [sigma, T::zero(), T::zero(), T::zero()]
-    }
-}
-
-/// The adjoint of [`unpremultiply`] at `v = [sigma, c]` (its output): a gradient `g` with respect
-/// to `[sigma, c]` becomes `[g_sigma - sum_k g_k c_k / sigma, g_c / sigma]` with respect to
-/// `[sigma, P]` (`dc / dP = 1 / sigma`, `dc / dsigma = -c / sigma`).
-#[inline(always)]
-fn unpremultiply_adjoint<T: Real>(v: [T; 4], g: [T; 4]) -> [T; 4] {
-    let sigma = v[0];
-    if sigma > T::of(MIN_WEIGHTING_DENSITY) {
-        let gp = [g[1] / sigma, g[2] / sigma, g[3] / sigma];
-        let along_colour = gp[0] * v[1] + gp[1] * v[2] + gp[2] * v[3];
-        [g[0] - along_colour, gp[0], gp[1], gp[2]]
-    } else {
-        [g[0], T::zero(), T::zero(), T::zero()]
-    }
-}
-
 /// `a + f (b - a)` per channel.
 #[inline(always)]
 fn lerp<T: Real>(a: [T; 4], b: [T; 4], f: T) -> [T; 4] {
@@ -179,14 +148,11 @@ impl<T: Real> Chunk<T> {
         }
     }
 
-    /// Interpolates the live lanes' values (and zeroes the rest); with `WEIGHTED` (a
-    /// density-weighted volume) the premultiplied colour is then divided by the density
-    /// ([`unpremultiply`]), with a post-activated volume the density is activated. With an
-    /// occupancy view, lanes whose corner block is empty are first marked dead. The colour rule
-    /// is a constant, not a test per lane: tested in the loop, it cost the separate rule 1.8x
-    /// its instructions (callgrind).
+    /// Interpolates the live lanes' values (and zeroes the rest); with a post-activated volume
+    /// the density is then activated. With an occupancy view, lanes whose corner block is empty
+    /// are first marked dead.
     #[inline(always)]
-    fn gather<const WEIGHTED: bool>(&mut self, vol: &VolumeView<'_, T>, occ: Option<&OccView<'_>>) {
+    fn gather(&mut self, vol: &VolumeView<'_, T>, occ: Option<&OccView<'_>>) {
         if let Some(o) = occ {
             for l in 0..self.len {
                 self.live[l] &= !o.empty_block[self.base[l] as usize];
@@ -204,12 +170,7 @@ impl<T: Real> Chunk<T> {
             let row = |r: usize| lerp(vol.data[r], vol.data[r + sx], fx);
             let near = lerp(row(b), row(b + sy), fy);
             let far = lerp(row(b + sz), row(b + sz + sy), fy);
-            let value = lerp(near, far, fz);
-            self.value[l] = if WEIGHTED {
-                unpremultiply(value)
-            } else {
-                value
-            };
+            self.value[l] = lerp(near, far, fz);
             self.sigma[l] = self.value[l][0];
         }
         if let Some([scale, shift]) = vol.post_activation {
@@ -239,16 +200,10 @@ impl<T: Real> Chunk<T> {
     }
 
     /// Adds `g` (per channel) to the corners of live lane `l` in `buf`, through the adjoint of
-    /// the lerps that interpolated it; with `WEIGHTED` (a density-weighted volume) `g` is first
-    /// taken through the adjoint of the division by the density ([`unpremultiply_adjoint`]),
-    /// and its density part through the activation's slope (1 unless post-activated).
+    /// the lerps that interpolated it, its density part first through the activation's slope
+    /// (1 unless post-activated).
     #[inline(always)]
-    pub(crate) fn scatter<const WEIGHTED: bool>(&self, l: usize, buf: &mut [[T; 4]], g: [T; 4]) {
-        let g = if WEIGHTED {
-            unpremultiply_adjoint(self.value[l], g)
-        } else {
-            g
-        };
+    pub(crate) fn scatter(&self, l: usize, buf: &mut [[T; 4]], g: [T; 4]) {
         let g = [g[0] * self.slope[l], g[1], g[2], g[3]];
         let b = self.base[l] as usize;
         let [sx, sy, sz] = self.step.map(|s| s[l] as usize);
@@ -295,7 +250,7 @@ impl<'a, T: Real> Chunks<'a, T> {
 
     /// Evaluates the next chunk of samples, or returns `None` past the last one.
     #[inline(always)]
-    pub(crate) fn next_chunk<const WEIGHTED: bool>(&mut self) -> Option<&Chunk<T>> {
+    pub(crate) fn next_chunk(&mut self) -> Option<&Chunk<T>> {
         let c = &mut self.chunk;
         c.len = 0;
         while c.len < LANES {
@@ -313,7 +268,7 @@ impl<'a, T: Real> Chunks<'a, T> {
             return None;
         }
         c.locate(self.vol.n);
-        c.gather::<WEIGHTED>(self.vol, self.occ);
+        c.gather(self.vol, self.occ);
         c.attenuate(self.dt);
         Some(&self.chunk)
     }
@@ -334,7 +289,7 @@ mod tests {
             }
         }
         c.locate(vol.n);
-        c.gather::<false>(vol, None);
+        c.gather(vol, None);
         c
     }
 
@@ -353,7 +308,6 @@ mod tests {
         let vol = VolumeView {
             data: &data,
             n,
-            density_weighted: false,
             post_activation: None,
         };
         let points = [
@@ -388,7 +342,6 @@ mod tests {
         let vol = VolumeView {
             data: &data,
             n,
-            density_weighted: false,
             post_activation: None,
         };
         let points = [[1.3, 0.0, 0.25], [2.0, 1.4, 0.5], [0.2, 0.7, 1.0]];
@@ -396,7 +349,7 @@ mod tests {
         let g = [0.5, -1.0, 2.0, 3.0];
         for l in 0..points.len() {
             let mut buf = vec![[0.0; 4]; data.len()];
-            c.scatter::<false>(l, &mut buf, g);
+            c.scatter(l, &mut buf, g);
             let lhs: f64 = (0..4).map(|k| c.value[l][k] * g[k]).sum();
             let rhs: f64 = data
                 .iter()

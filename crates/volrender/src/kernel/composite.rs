@@ -43,11 +43,9 @@ pub(crate) struct RayOut<T> {
     pub(crate) live: (usize, usize),
 }
 
-/// Renders one ray; `WEIGHTED`: the volume's colours are density-weighted
-/// ([`VolumeView::density_weighted`]), a constant so that each rule's loops compile on their own
-/// (see `Chunk::gather`).
+/// Renders one ray.
 #[inline(always)]
-pub(crate) fn forward_ray<T: Real, const WEIGHTED: bool>(
+pub(crate) fn forward_ray<T: Real>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
     g: &RayGeom<T>,
@@ -58,7 +56,7 @@ pub(crate) fn forward_ray<T: Real, const WEIGHTED: bool>(
     let (mut depth, mut opacity) = (T::zero(), T::zero());
     let (mut first_live, mut end_live) = (None, 0);
     let mut chunks = Chunks::new(vol, occ, g, 0);
-    'ray: while let Some(c) = chunks.next_chunk::<WEIGHTED>() {
+    'ray: while let Some(c) = chunks.next_chunk() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
@@ -95,10 +93,9 @@ pub(crate) fn forward_ray<T: Real, const WEIGHTED: bool>(
 }
 
 /// Adds one ray's gradient with respect to the voxels to `buf`, given the forward's output
-/// `out` and the output gradient `[d_r, d_g, d_b, d_depth, d_opacity]`; `WEIGHTED` as in
-/// [`forward_ray`].
+/// `out` and the output gradient `[d_r, d_g, d_b, d_depth, d_opacity]`.
 #[inline(always)]
-pub(crate) fn backward_ray<T: Real, const WEIGHTED: bool>(
+pub(crate) fn backward_ray<T: Real>(
     vol: &VolumeView<'_, T>,
     occ: Option<&OccView<'_>>,
     g: &RayGeom<T>,
@@ -117,7 +114,7 @@ pub(crate) fn backward_ray<T: Real, const WEIGHTED: bool>(
     let (from, to) = out.live;
     let g = &RayGeom { n: to, ..*g };
     let mut chunks = Chunks::new(vol, occ, g, from);
-    'ray: while let Some(c) = chunks.next_chunk::<WEIGHTED>() {
+    'ray: while let Some(c) = chunks.next_chunk() {
         for l in 0..c.len {
             if !c.live[l] {
                 continue;
@@ -128,7 +125,7 @@ pub(crate) fn backward_ray<T: Real, const WEIGHTED: bool>(
             let x = gr * v[1] + gg * v[2] + gb * v[3] + gd * c.t[l];
             upto = upto + w * x;
             let d_tau = next * x - (total - upto) + opacity_term;
-            c.scatter::<WEIGHTED>(l, buf, [d_tau * g.dt, w * gr, w * gg, w * gb]);
+            c.scatter(l, buf, [d_tau * g.dt, w * gr, w * gg, w * gb]);
             trans = next;
             if trans <= p.epsilon {
                 break 'ray;
@@ -184,7 +181,6 @@ mod tests {
         let vol = VolumeView {
             data: &data,
             n: [3, 3, 3],
-            density_weighted: false,
             post_activation: None,
         };
         let grid = GridSpec {
@@ -212,7 +208,7 @@ mod tests {
             live: (0, 0),
         };
         for n in 1..=full.n {
-            let out = forward_ray::<_, false>(&vol, None, &RayGeom { n, ..full }, &p);
+            let out = forward_ray(&vol, None, &RayGeom { n, ..full }, &p);
             assert!(
                 out.trans <= last.trans && out.opacity >= last.opacity,
                 "sample {n}"
@@ -244,7 +240,6 @@ mod tests {
         let vol = VolumeView {
             data: &data,
             n,
-            density_weighted: false,
             post_activation: None,
         };
         let grid = GridSpec {
@@ -277,19 +272,11 @@ mod tests {
                 };
                 for (origin, dir) in rays {
                     let g = setup_ray(origin, dir, &grid, Sampler::Uniform { samples: 29 });
-                    let out = forward_ray::<_, false>(&vol, occ, &g, &p);
+                    let out = forward_ray(&vol, occ, &g, &p);
                     let backward = |live| {
                         let mut buf = vec![[0f32; 4]; voxels];
                         let grad = [0.3, -1.0, 0.7, 0.25, -0.5];
-                        backward_ray::<_, false>(
-                            &vol,
-                            occ,
-                            &g,
-                            &p,
-                            &RayOut { live, ..out },
-                            grad,
-                            &mut buf,
-                        );
+                        backward_ray(&vol, occ, &g, &p, &RayOut { live, ..out }, grad, &mut buf);
                         buf.as_flattened()
                             .iter()
                             .map(|v| v.to_bits())

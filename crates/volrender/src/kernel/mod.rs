@@ -119,17 +119,13 @@ impl Real for f64 {
 }
 
 /// A volume as the kernels see it: interleaved `[sigma, r, g, b]` per voxel, row-major
-/// `(z, y, x)`, with `n = [w, h, d]` cells along x, y, z. With `density_weighted` the colours are
-/// premultiplied, `[sigma, sigma r, sigma g, sigma b]`, and a sample's colour is its
-/// interpolated premultiplied colour divided by its interpolated density
-/// ([`crate::ColourInterpolation::DensityWeighted`]). With `post_activation = [scale, shift]`
-/// channel 0 is raw density and a sample's density is `scale * softplus(raw + shift)` of its
-/// interpolated raw value ([`crate::DensityInterpolation::PostActivated`]).
+/// `(z, y, x)`, with `n = [w, h, d]` cells along x, y, z. With `post_activation = [scale,
+/// shift]` channel 0 is raw density and a sample's density is `scale * softplus(raw + shift)` of
+/// its interpolated raw value ([`crate::DensityInterpolation::PostActivated`]).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct VolumeView<'a, T> {
     pub(crate) data: &'a [[T; 4]],
     pub(crate) n: [usize; 3],
-    pub(crate) density_weighted: bool,
     pub(crate) post_activation: Option<[T; 2]>,
 }
 

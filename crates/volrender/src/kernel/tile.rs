@@ -108,12 +108,7 @@ impl<T: Real> RayKernel<'_, T> {
     fn forward_tile_inline(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], out: &mut [T]) {
         for ((&origin, &dir), o) in origins.iter().zip(dirs).zip(out.chunks_exact_mut(PACKED)) {
             let g = setup_ray(origin, dir, &self.grid, self.sampler);
-            let (vol, occ) = (&self.volume, self.occupancy.as_ref());
-            let r = if vol.density_weighted {
-                forward_ray::<T, true>(vol, occ, &g, &self.params)
-            } else {
-                forward_ray::<T, false>(vol, occ, &g, &self.params)
-            };
+            let r = forward_ray(&self.volume, self.occupancy.as_ref(), &g, &self.params);
             let (from, to) = r.live;
             o.copy_from_slice(&[
                 r.rgb[0],
@@ -155,12 +150,15 @@ impl<T: Real> RayKernel<'_, T> {
                 live,
             };
             let g_out = [gr[0], gr[1], gr[2], gr[3], gr[4]];
-            let (vol, occ, p) = (&self.volume, self.occupancy.as_ref(), &self.params);
-            if vol.density_weighted {
-                backward_ray::<T, true>(vol, occ, &g, p, &out, g_out, buf);
-            } else {
-                backward_ray::<T, false>(vol, occ, &g, p, &out, g_out, buf);
-            }
+            backward_ray(
+                &self.volume,
+                self.occupancy.as_ref(),
+                &g,
+                &self.params,
+                &out,
+                g_out,
+                buf,
+            );
         }
     }
 }
@@ -209,7 +207,6 @@ mod tests {
                 volume: VolumeView {
                     data: &data,
                     n,
-                    density_weighted: false,
                     post_activation,
                 },
                 occupancy,

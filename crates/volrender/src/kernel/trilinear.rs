@@ -104,7 +104,6 @@ mod tests {
         let view = VolumeView {
             data: &interleaved,
             n: [4, 3, 2],
-            density_weighted: false,
             post_activation: None,
         };
         let mut expected = [0f32; 4];

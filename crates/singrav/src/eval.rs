@@ -1,0 +1,395 @@
+//! The evaluation protocol: every quality number of a trained model against its dataset.
+//!
+//! It renders the fixed-noise reconstruction V* and [`EvalConfig::scenes`] generated scenes
+//! from cameras of the training dataset and compares them with the dataset's images from the
+//! same cameras, as the paper evaluates SinGRAV (docs/metrics.md defines every number):
+//!
+//! - V* against the training views (and the held-out views of a run trained with a holdout):
+//!   PSNR, SSIM and depth RMSE as the model outputs them, and V*'s volume itself as
+//!   `volgen fit` scores its volumes ([`SinGrav::volume_psnr`]);
+//! - the generated scenes against [`EvalConfig::views`] views spread over all frames: patch
+//!   SWD-MV, colour SWD, floaters, Diversity-MV (each with its standard error over scenes) and,
+//!   given InceptionV3's first block, SIFID-MV;
+//! - the generated volumes' arrangement: their [`layout_distance`] from the scene's volume,
+//!   which is a direct fit of the training views ([`LayoutReference::Fit`]) or V*
+//!   ([`LayoutReference::Reconstruction`]).
+//!
+//! ```no_run
+//! use singrav::eval::{evaluate, EvalConfig};
+//! let (model, _) = singrav::SinGrav::load("out/demo/run".as_ref(), &candle_core::Device::Cpu)?;
+//! let data = rgbd_dataset::Dataset::load("out/demo/dataset".as_ref(), model.config().rendering.background)?;
+//! let numbers = evaluate(&model, &data, &EvalConfig::default(), None, &mut |_, _| {})?;
+//! println!("V*: {:.2} dB, Diversity-MV {:.3}", numbers.reconstruction_psnr, numbers.diversity_mv);
+//! # Ok::<(), singrav::Error>(())
+//! ```
+
+use candle_core::Tensor;
+use radiance_volume::RadianceVolume;
+use rand::SeedableRng;
+use rgbd_dataset::Dataset;
+use scene_metrics::{
+    colour_swd_per_scene, depth_rmse, diversity_mv, floaters_per_scene, layout_distance, mean_psnr,
+    mean_ssim, patch_swd_per_scene, sifid_mv, Estimate, InceptionBlock1, LayoutPoints,
+    LAYOUT_DIRECTIONS, PATCH_SWD_MIN_SIDE,
+};
+use serde::Serialize;
+
+use crate::error::{invalid, Result};
+use crate::SinGrav;
+
+/// The scene's volume the generated volumes' arrangement is measured against.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum LayoutReference {
+    /// A direct fit of the dataset's training views ([`crate::train::fit_training_target`]):
+    /// the scene itself, as far as its views show it.
+    #[default]
+    Fit,
+    /// The model's reconstruction V* (no fit; what the model learnt of the scene).
+    Reconstruction,
+}
+
+impl std::str::FromStr for LayoutReference {
+    type Err = crate::Error;
+
+    fn from_str(name: &str) -> Result<Self> {
+        match name {
+            "fit" => Ok(Self::Fit),
+            "vstar" | "reconstruction" => Ok(Self::Reconstruction),
+            other => Err(invalid(
+                "layout reference",
+                format!("`{other}`: expected fit or vstar"),
+            )),
+        }
+    }
+}
+
+/// How many scenes and views an evaluation compares, and the noise it draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EvalConfig {
+    /// Scenes to generate (at least 2: Diversity-MV is a spread over scenes; the paper: 50).
+    /// With 32 a `tiny` run's floaters vary by about 10% between noise seeds, with 8 by twice
+    /// that (docs/metrics.md, "How precise the sample metrics are").
+    pub scenes: usize,
+    /// Dataset views to compare, evenly spaced over its frames (the paper: 40); as many of the
+    /// training and of the held-out frames for the reconstruction.
+    pub views: usize,
+    /// Seed of the noise; the same seed gives the scenes `volgen sample --seed` gives.
+    pub seed: u64,
+    /// The scene's volume the layout distance is measured against.
+    pub layout_reference: LayoutReference,
+}
+
+impl Default for EvalConfig {
+    /// `volgen eval`'s defaults: 32 scenes from 4 views, seed 0, layouts against a fit.
+    fn default() -> Self {
+        Self {
+            scenes: 32,
+            views: 4,
+            seed: 0,
+            layout_reference: LayoutReference::Fit,
+        }
+    }
+}
+
+/// Every number of one model (what `eval.json` holds besides the paths). Infinite PSNRs (exact
+/// reconstructions) serialise as null.
+#[derive(Debug, Clone, Serialize)]
+pub struct Evaluation {
+    /// Scenes generated.
+    pub scenes: usize,
+    /// Seed of their noise.
+    pub seed: u64,
+    /// The dataset frames (their `file_path`) the generated scenes were seen from.
+    pub views: Vec<String>,
+    /// Edge of the compared colour images in pixels (the model's final size).
+    pub image_size: usize,
+    /// Edge of the depth and opacity maps (the last 3D scale's rendering size).
+    pub depth_size: usize,
+    /// The run's `--holdout N`, if it had one.
+    pub holdout: Option<usize>,
+    /// The training frames the reconstruction was seen from.
+    pub reconstruction_views: Vec<String>,
+    /// dB, higher is better.
+    pub reconstruction_psnr: f64,
+    /// 1 is a perfect reconstruction.
+    pub reconstruction_ssim: f64,
+    /// World units, lower is better.
+    pub reconstruction_depth_rmse: f64,
+    /// The held-out frames (empty without a holdout).
+    pub held_out_views: Vec<String>,
+    /// V* on the held-out views, dB.
+    pub held_out_psnr: Option<f64>,
+    /// V* on the held-out views.
+    pub held_out_ssim: Option<f64>,
+    /// V* on the held-out views, world units.
+    pub held_out_depth_rmse: Option<f64>,
+    /// dB: V* itself, the finest 3D scale's volume, rendered from every training view at the
+    /// dataset's resolution as `volgen fit` measures its volumes, by the run's density rule
+    /// (post-activated runs: as `volgen fit --post-activation`), so the two compare on equal
+    /// terms (no upsampler).
+    pub volume_psnr: f64,
+    /// How many training views `volume_psnr` averages.
+    pub volume_views: usize,
+    /// The same over every held-out view (None without a holdout).
+    pub held_out_volume_psnr: Option<f64>,
+    /// Lower is closer to the real views' patch statistics; None for views too small for its
+    /// pyramid.
+    pub patch_swd_mv: Option<f64>,
+    /// One standard error of `patch_swd_mv` over the generated scenes (as for every `_stderr`
+    /// below: the value's spread over repeated draws of as many scenes).
+    pub patch_swd_mv_stderr: Option<f64>,
+    /// Lower is closer to the real views' colours.
+    pub colour_swd: f64,
+    /// Its standard error over scenes.
+    pub colour_swd_stderr: f64,
+    /// Mean opacity where the real views are empty; None when no real pixel is empty.
+    pub floaters: Option<f64>,
+    /// Its standard error over scenes.
+    pub floaters_stderr: Option<f64>,
+    /// Higher is more varied; 0 when every scene is the same.
+    pub diversity_mv: f64,
+    /// The jackknife standard error over scenes; None with fewer than 3 scenes.
+    pub diversity_mv_stderr: Option<f64>,
+    /// Lower is closer to the real views' statistics; None without InceptionV3 weights.
+    pub sifid_mv: Option<f64>,
+    /// The generated volumes' mean [`layout_distance`] from `layout_reference`'s volume: lower
+    /// keeps the scene's arrangement (where its matter is, of which colour) closer.
+    pub layout_distance: f64,
+    /// Its standard error over scenes.
+    pub layout_distance_stderr: f64,
+    /// V*'s layout distance from the fit (None when V* is the reference).
+    pub reconstruction_layout_distance: Option<f64>,
+    /// What the layout distances are measured against: `fit` (a direct fit of the training
+    /// views) or `vstar`.
+    pub layout_reference: String,
+}
+
+/// How closely V* reproduces a set of real views.
+struct Reproduction {
+    views: Vec<String>,
+    psnr: f64,
+    ssim: f64,
+    depth_rmse: f64,
+}
+
+/// Every number of `model` against `dataset` (in the scene's own coordinates, as loaded; a run
+/// trained with `--bounds` is compared in its model cube). `inception` adds SIFID-MV;
+/// `progress(i, scenes)` is called after each generated scene is rendered.
+pub fn evaluate(
+    model: &SinGrav,
+    dataset: &Dataset,
+    config: &EvalConfig,
+    inception: Option<&InceptionBlock1>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Evaluation> {
+    if config.scenes < 2 {
+        return Err(invalid(
+            "scenes",
+            "must be at least 2: Diversity-MV is a spread over scenes",
+        ));
+    }
+    if config.views < 1 {
+        return Err(invalid("views", "must be at least 1"));
+    }
+    let device = model.device();
+    // The model renders in its own cube: a run trained with --bounds sees the views there.
+    // Kept apart from the scene's copy only when the two differ.
+    let in_cube = match &model.config().run.bounds {
+        Some(bounds) => Some(dataset.in_model_cube(bounds)?),
+        None => None,
+    };
+    let scene_dataset = dataset;
+    let dataset = in_cube.as_ref().unwrap_or(scene_dataset);
+    if config.views > dataset.len() {
+        return Err(invalid(
+            "views",
+            format!(
+                "{} is more than the dataset's {} frames",
+                config.views,
+                dataset.len()
+            ),
+        ));
+    }
+    let holdout = model.config().run.holdout;
+    let (training, held_out) = match holdout {
+        Some(every) => dataset.holdout_split(every)?,
+        None => ((0..dataset.len()).collect(), Vec::new()),
+    };
+
+    let v_star = model.reconstruct()?;
+    let reference = layout_reference(model, &v_star, scene_dataset, config.layout_reference)?;
+    let reconstruction_layout = match config.layout_reference {
+        LayoutReference::Fit => Some(layout_from(&reference, &model.to_physical(&v_star)?)?),
+        LayoutReference::Reconstruction => None,
+    };
+    let reconstruction = reproduction(model, &v_star, dataset, &spread(&training, config.views))?;
+    let held = (!held_out.is_empty())
+        .then(|| reproduction(model, &v_star, dataset, &spread(&held_out, config.views)))
+        .transpose()?;
+    // In the scene's coordinates, with the density rule the run renders by.
+    let training_volume_psnr = model.volume_psnr(&v_star, scene_dataset, &training)?;
+    let held_out_volume_psnr = (!held_out.is_empty())
+        .then(|| model.volume_psnr(&v_star, scene_dataset, &held_out))
+        .transpose()?;
+
+    let all: Vec<usize> = (0..dataset.len()).collect();
+    let chosen = dataset.subset(&spread(&all, config.views))?;
+    let size = model.render_size();
+    let coarse = chosen.level(size, size, device)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
+    let mut views: Vec<Tensor> = Vec::with_capacity(config.scenes);
+    let mut opacity: Vec<Tensor> = Vec::with_capacity(config.scenes);
+    let mut layouts: Vec<f64> = Vec::with_capacity(config.scenes);
+    for i in 0..config.scenes {
+        // As `SinGrav::sample` draws them: scene i here is scene i of `volgen sample`.
+        let raw = model.generate_random(&mut rng)?;
+        layouts.push(layout_from(&reference, &model.to_physical(&raw)?)?);
+        let maps = model.render_maps(&raw, &coarse.cameras)?;
+        views.push(maps.rgb);
+        opacity.push(maps.opacity);
+        progress(i + 1, config.scenes);
+    }
+    // The upsampler, when trained, doubles the renderings: compare at the size they came out.
+    let image_size = views[0].dim(3)?;
+    let real = chosen.level(image_size, image_size, device)?.images;
+    let patch_swd = (image_size >= PATCH_SWD_MIN_SIDE)
+        .then(|| Estimate::mean_of(&patch_swd_per_scene(&views, &real)?))
+        .transpose()?;
+    let colour = Estimate::mean_of(&colour_swd_per_scene(&views, &real)?)?;
+    let layout = Estimate::mean_of(&layouts)?;
+    let floaters = floaters_per_scene(&opacity, &coarse.opacity)?
+        .map(|per_scene| Estimate::mean_of(&per_scene))
+        .transpose()?;
+    // The jackknife computes Diversity-MV over all scenes too; below 3 scenes it has no error.
+    let (diversity, diversity_stderr) = if config.scenes >= 3 {
+        let estimate = Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real))?;
+        (estimate.value, Some(estimate.stderr))
+    } else {
+        (diversity_mv(&views, &real)?, None)
+    };
+
+    Ok(Evaluation {
+        scenes: config.scenes,
+        seed: config.seed,
+        views: chosen.frame_names().to_vec(),
+        image_size,
+        depth_size: size,
+        holdout,
+        reconstruction_views: reconstruction.views,
+        reconstruction_psnr: reconstruction.psnr,
+        reconstruction_ssim: reconstruction.ssim,
+        reconstruction_depth_rmse: reconstruction.depth_rmse,
+        held_out_views: held.as_ref().map(|h| h.views.clone()).unwrap_or_default(),
+        held_out_psnr: held.as_ref().map(|h| h.psnr),
+        held_out_ssim: held.as_ref().map(|h| h.ssim),
+        held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
+        volume_psnr: training_volume_psnr,
+        volume_views: training.len(),
+        held_out_volume_psnr,
+        patch_swd_mv: patch_swd.map(|e| e.value),
+        patch_swd_mv_stderr: patch_swd.map(|e| e.stderr),
+        colour_swd: colour.value,
+        colour_swd_stderr: colour.stderr,
+        floaters: floaters.map(|e| e.value),
+        floaters_stderr: floaters.map(|e| e.stderr),
+        diversity_mv: diversity,
+        diversity_mv_stderr: diversity_stderr,
+        sifid_mv: inception
+            .map(|block| sifid_mv(&views, &real, block))
+            .transpose()?,
+        layout_distance: layout.value,
+        layout_distance_stderr: layout.stderr,
+        reconstruction_layout_distance: reconstruction_layout,
+        layout_reference: match config.layout_reference {
+            LayoutReference::Fit => "fit".into(),
+            LayoutReference::Reconstruction => "vstar".into(),
+        },
+    })
+}
+
+/// The matter of the scene's volume that layouts are measured against, in the scene's
+/// coordinates: a fit of `dataset`'s training views, or V*.
+fn layout_reference(
+    model: &SinGrav,
+    v_star: &Tensor,
+    dataset: &Dataset,
+    reference: LayoutReference,
+) -> Result<LayoutPoints> {
+    let volume = match reference {
+        LayoutReference::Fit => {
+            crate::train::fit_training_target(model.config(), dataset, None, &mut |_| {})?.volume
+        }
+        LayoutReference::Reconstruction => model.to_physical(v_star)?,
+    };
+    layout_points(&volume)
+}
+
+/// A physical volume's matter as layout points.
+fn layout_points(volume: &RadianceVolume) -> Result<LayoutPoints> {
+    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
+    Ok(LayoutPoints::from_volume(volume.tensor(), voxel)?)
+}
+
+/// The layout distance of `volume` from the reference's matter; a volume with no matter is as
+/// far as a layout can be measured to be (infinite).
+fn layout_from(reference: &LayoutPoints, volume: &RadianceVolume) -> Result<f64> {
+    match layout_points(volume) {
+        Ok(points) => Ok(layout_distance(
+            reference,
+            &points,
+            LAYOUT_DIRECTIONS,
+            LAYOUT_SEED,
+        )?),
+        Err(crate::Error::Metrics(scene_metrics::Error::Invalid { why, .. }))
+            if why.contains("no matter") =>
+        {
+            Ok(f64::INFINITY)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// The seed of the layout distance's directions: the same for every evaluation, so that
+/// distances compare across runs.
+const LAYOUT_SEED: u64 = 0;
+
+/// V* against the dataset's `frames`: colour at the final size, depth at the 3D pyramid's.
+fn reproduction(
+    model: &SinGrav,
+    v_star: &Tensor,
+    dataset: &Dataset,
+    frames: &[usize],
+) -> Result<Reproduction> {
+    let chosen = dataset.subset(frames)?;
+    let size = model.render_size();
+    let coarse = chosen.level(size, size, model.device())?;
+    let maps = model.render_maps(v_star, &coarse.cameras)?;
+    let image_size = maps.rgb.dim(3)?;
+    let real = chosen.level(image_size, image_size, model.device())?.images;
+    Ok(Reproduction {
+        views: chosen.frame_names().to_vec(),
+        psnr: mean_psnr(&maps.rgb, &real)?,
+        ssim: mean_ssim(&maps.rgb, &real)?,
+        depth_rmse: depth_rmse(&maps.depth, &coarse.depths)?,
+    })
+}
+
+/// `count` of `indices` evenly spaced (all of them when there are fewer).
+fn spread(indices: &[usize], count: usize) -> Vec<usize> {
+    let count = count.min(indices.len());
+    (0..count)
+        .map(|i| indices[i * indices.len() / count])
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spread;
+
+    #[test]
+    fn spread_takes_evenly_spaced_indices_and_all_when_there_are_fewer() {
+        assert_eq!(spread(&[0, 1, 2, 3, 4, 5, 6, 7], 4), vec![0, 2, 4, 6]);
+        assert_eq!(spread(&[3, 5, 9], 2), vec![3, 5]);
+        assert_eq!(spread(&[3, 5], 4), vec![3, 5]);
+    }
+}
