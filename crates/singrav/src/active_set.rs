@@ -1,9 +1,9 @@
 //! The active set of a finer 3D scale: the voxels where its generator may change the volume.
 //!
-//! From [`TrainConfig::sparse_from_scale`] on, a finer scale computes
+//! From [`ActiveSet::from_scale`] on, a finer scale computes
 //! `V_n = up(V_{n-1}) + S_A(G_n^A(z_n + up(V_{n-1})))`, where the active set `A` is every voxel
-//! within [`TrainConfig::sparse_margin`] voxels (in every axis, a cube around each voxel) of a
-//! voxel whose density in `up(V_{n-1})` exceeds [`TrainConfig::sparse_threshold`]. `G_n^A` is
+//! within [`ActiveSet::margin`] voxels (in every axis, a cube around each voxel) of a
+//! voxel whose density in `up(V_{n-1})` exceeds [`ActiveSet::threshold`]. `G_n^A` is
 //! the generator run on `A` only, as submanifold layers (patch-gan's
 //! `Generator3d::forward_residual_active`): each convolution computes the voxels of `A` and
 //! reads the voxels outside it as zero, and BatchNorm takes its statistics over `A`; `S_A` puts
@@ -12,9 +12,9 @@
 //! as the coarser scale made it, so they cannot put matter in the sky. The set is computed per
 //! volume (every generated sample has its own) and is a constant to the gradient.
 //!
-//! [`TrainConfig::sparse_from_scale`]: crate::TrainConfig::sparse_from_scale
-//! [`TrainConfig::sparse_margin`]: crate::TrainConfig::sparse_margin
-//! [`TrainConfig::sparse_threshold`]: crate::TrainConfig::sparse_threshold
+//! [`ActiveSet::from_scale`]: crate::config::ActiveSet::from_scale
+//! [`ActiveSet::margin`]: crate::config::ActiveSet::margin
+//! [`ActiveSet::threshold`]: crate::config::ActiveSet::threshold
 
 use candle_core::{DType, Tensor};
 use patch_gan::ActiveSites;

@@ -35,7 +35,7 @@ pub struct SinGrav {
     /// the configuration optimises it (`reconstruction_noise_lr > 0`); zeros otherwise.
     fine_z_star: Vec<Var>,
     /// Added to the finest 3D scale's reconstruction once training has fitted it to the views
-    /// ([`TrainConfig::reconstruction_fit_steps`]): `(1, 4, s, s, s)` raw values.
+    /// ([`Schedule::reconstruction_fit_steps`](crate::config::Schedule::reconstruction_fit_steps)): `(1, 4, s, s, s)` raw values.
     reconstruction_detail: Option<Tensor>,
     csg: Option<Tensor>,
 }
@@ -316,7 +316,7 @@ impl SinGrav {
     }
 
     /// What training's fit of the reconstruction to the views added to the finest 3D scale's
-    /// V* ([`TrainConfig::reconstruction_fit_steps`]), if it ran: raw values `(1, 4, s, s, s)`.
+    /// V* ([`Schedule::reconstruction_fit_steps`](crate::config::Schedule::reconstruction_fit_steps)), if it ran: raw values `(1, 4, s, s, s)`.
     /// [`SinGrav::reconstruct`] includes it; generated scenes never see it.
     pub fn reconstruction_detail(&self) -> Option<&Tensor> {
         self.reconstruction_detail.as_ref()

@@ -133,7 +133,7 @@ impl SinGrav {
 
     /// The physical volume of a raw volume `(1, 4, s, s, s)`, through the configuration's
     /// activation, in the scene's coordinates: over `[-1, 1]^3`, or when the run was trained
-    /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) over their
+    /// with [`RunPolicy::bounds`](crate::config::RunPolicy::bounds) over their
     /// [`cube`](rgbd_dataset::SceneBounds::cube) with density divided by its half side (the
     /// same opacity along the longer rays).
     pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
@@ -149,7 +149,7 @@ impl SinGrav {
     }
 
     /// The model's cube in the scene's coordinates and its half side: `[-1, 1]^3` and 1, or
-    /// with [`TrainConfig::bounds`](crate::TrainConfig::bounds) their cube.
+    /// with [`RunPolicy::bounds`](crate::config::RunPolicy::bounds) their cube.
     fn scene_cube(&self) -> (Aabb, f32) {
         self.config()
             .run
@@ -162,17 +162,14 @@ impl SinGrav {
     /// A raw volume `(1, 4, s, s, s)` as a renderer outside the model takes it, in the scene's
     /// coordinates, with the density rule to render it by: [`SinGrav::to_physical`] and
     /// physical density; or, for a run trained with
-    /// [`TrainConfig::post_activation`](crate::TrainConfig::post_activation), the same with raw
+    /// [`Rendering::post_activation`](crate::config::Rendering::post_activation), the same with raw
     /// density in channel 0 and the post-activation that renders it as the model does (its
     /// scale divided by the bounds' half side, as `to_physical` divides density).
     ///
     /// ```
     /// use candle_core::{DType, Device, Tensor};
     /// use rand::SeedableRng;
-    /// let config = singrav::TrainConfig {
-    ///     post_activation: true,
-    ///     ..singrav::TrainConfig::preset("micro")?
-    /// };
+    /// let config = singrav::TrainConfig::preset("micro")?.with(|c| c.rendering.post_activation = true);
     /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
     /// let raw = (Tensor::ones((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)? * -2.0)?;
@@ -235,7 +232,7 @@ impl SinGrav {
     /// tools, volrender's `DensityInterpolation::Physical`): every fine voxel holds what the
     /// model's own renderer computes at its centre ([`crate::export::physical_upsampled`] of
     /// [`SinGrav::to_rendered`]). For a run trained with
-    /// [`TrainConfig::post_activation`](crate::TrainConfig::post_activation) the edges between
+    /// [`Rendering::post_activation`](crate::config::Rendering::post_activation) the edges between
     /// its voxels come back; other runs' volumes render as at 1. `factor` 1 is
     /// [`SinGrav::to_physical`] bit for bit; even factors are refused.
     ///

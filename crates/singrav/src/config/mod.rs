@@ -22,7 +22,7 @@ mod validate;
 pub use schedule::{ScaleSchedule, ScaleViews};
 pub use setting::settings_that_differ;
 
-/// The configuration format this version reads and writes ([`TrainConfig::version`]).
+/// The configuration format this version reads and writes ([`TrainConfig::version`](TrainConfig#structfield.version)).
 /// Version 1 (before 2026-12) was one flat object of 57 settings; such runs are refused with
 /// an explanation ([`TrainConfig::from_json`]).
 pub const CONFIG_VERSION: u32 = 2;

@@ -59,7 +59,7 @@ pub struct RunOptions {
     /// A directly fitted volume (see [`volume_fit`]) for a configuration whose
     /// `losses.fitted` or `losses.volume_critic` is positive, refused otherwise. Without one
     /// such a run fits the training views itself first
-    /// ([`TrainConfig::fit_config`]; `tiny`'s takes about 10 s), and a resumed run
+    /// ([`TrainConfig::fit_config`](crate::TrainConfig::fit_config); `tiny`'s takes about 10 s), and a resumed run
     /// uses its own copy (`fitted.safetensors`).
     pub fitted_volume: Option<PathBuf>,
     /// Test hook: before iteration `.1` (0-based) of scale `.0`, every weight of that scale's
