@@ -30,7 +30,8 @@ pub struct LayoutPoints {
 impl LayoutPoints {
     /// The matter of a physical volume `(4, D, H, W)` (density, then RGB in [0, 1]) over a box
     /// whose voxels are `voxel` world units long, as points in the box normalised to
-    /// `[-1, 1]^3`. Voxels of opacity below `1e-4` are left out (empty space).
+    /// `[-1, 1]^3`. Voxels of opacity below `1e-4` are left out (empty space); a volume with no
+    /// matter gives an empty set, which [`layout_distance`] puts infinitely far from any other.
     ///
     /// ```
     /// use candle_core::{Device, Tensor};
@@ -90,9 +91,6 @@ impl LayoutPoints {
             }
         }
         let total: f64 = weights.iter().sum();
-        if total <= 0.0 {
-            return Err(invalid("volume", "holds no matter to compare"));
-        }
         weights.iter_mut().for_each(|w| *w /= total);
         Ok(Self { points, weights })
     }
@@ -102,7 +100,7 @@ impl LayoutPoints {
         self.points.len()
     }
 
-    /// Whether there are no points (never, for a set [`LayoutPoints::from_volume`] made).
+    /// Whether there are no points (the volume held no matter).
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
@@ -133,7 +131,8 @@ pub const LAYOUT_DIRECTIONS: usize = 128;
 /// The sliced Wasserstein-1 distance between two volumes' matter: the mean over `directions`
 /// random unit directions of `(x, y, z, r, g, b)` (drawn from `seed`, the same for every pair
 /// so that distances compare) of the exact 1D W1 distance between the weighted projections.
-/// 0 for the same matter; symmetric.
+/// 0 for the same matter; symmetric; infinite when one volume holds no matter and the other
+/// does (its matter has nowhere to go), 0 when neither does.
 ///
 /// ```
 /// use candle_core::{Device, Tensor};
@@ -161,8 +160,10 @@ pub fn layout_distance(
     if directions == 0 {
         return Err(invalid("directions", "need at least one"));
     }
-    if a.is_empty() || b.is_empty() {
-        return Err(invalid("layout points", "a volume holds no matter"));
+    match (a.is_empty(), b.is_empty()) {
+        (true, true) => return Ok(0.0),
+        (true, false) | (false, true) => return Ok(f64::INFINITY),
+        (false, false) => {}
     }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut total = 0.0;
@@ -307,12 +308,20 @@ mod tests {
     }
 
     #[test]
-    fn empty_volumes_and_bad_input_are_refused() {
+    fn empty_volumes_are_infinitely_far_and_bad_input_is_refused() {
         let empty = volume(4, [0.5; 3], |_, _, _| false);
-        let err = LayoutPoints::from_volume(&empty, 0.5)
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("no matter"), "{err}");
+        let nothing = LayoutPoints::from_volume(&empty, 0.5).unwrap();
+        assert!(nothing.is_empty());
+        let row = LayoutPoints::from_volume(&volume(4, [0.5; 3], |x, _, _| x == 1), 0.5).unwrap();
+        assert_eq!(
+            layout_distance(&nothing, &row, 8, 0).unwrap(),
+            f64::INFINITY
+        );
+        assert_eq!(
+            layout_distance(&row, &nothing, 8, 0).unwrap(),
+            f64::INFINITY
+        );
+        assert_eq!(layout_distance(&nothing, &nothing, 8, 0).unwrap(), 0.0);
         let three = Tensor::zeros((3, 2, 2, 2), candle_core::DType::F32, &Device::Cpu).unwrap();
         assert!(LayoutPoints::from_volume(&three, 0.5).is_err());
         let some = volume(4, [0.5; 3], |x, _, _| x == 0);

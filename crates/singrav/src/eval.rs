@@ -330,23 +330,16 @@ fn layout_points(volume: &RadianceVolume) -> Result<LayoutPoints> {
     Ok(LayoutPoints::from_volume(volume.tensor(), voxel)?)
 }
 
-/// The layout distance of `volume` from the reference's matter; a volume with no matter is as
-/// far as a layout can be measured to be (infinite).
+/// The layout distance of `volume` from the reference's matter (infinite for a volume with no
+/// matter: [`layout_distance`]).
 fn layout_from(reference: &LayoutPoints, volume: &RadianceVolume) -> Result<f64> {
-    match layout_points(volume) {
-        Ok(points) => Ok(layout_distance(
-            reference,
-            &points,
-            LAYOUT_DIRECTIONS,
-            LAYOUT_SEED,
-        )?),
-        Err(crate::Error::Metrics(scene_metrics::Error::Invalid { why, .. }))
-            if why.contains("no matter") =>
-        {
-            Ok(f64::INFINITY)
-        }
-        Err(e) => Err(e),
-    }
+    let points = layout_points(volume)?;
+    Ok(layout_distance(
+        reference,
+        &points,
+        LAYOUT_DIRECTIONS,
+        LAYOUT_SEED,
+    )?)
 }
 
 /// The seed of the layout distance's directions: the same for every evaluation, so that

@@ -2,6 +2,7 @@
 //! resumes one, [`Trainer::train_scale`] trains the next scale (set-up, iterations, checkpoints,
 //! picture), [`Trainer::finish`] fits the reconstruction when asked and hands the model over.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -81,8 +82,9 @@ pub fn train(
 /// scale starts from.
 pub struct Trainer<'a> {
     config: &'a TrainConfig,
-    /// The training views in the model's cube.
-    dataset: Dataset,
+    /// The training views in the model's cube (the caller's dataset itself when it has no
+    /// held-out views and no bounds to move).
+    dataset: Cow<'a, Dataset>,
     run_dir: PathBuf,
     checkpoint_file: PathBuf,
     options: &'a RunOptions,
@@ -105,15 +107,15 @@ impl<'a> Trainer<'a> {
     /// [`train`] describes; writes `config.json` and opens the loss log.
     pub fn new(
         config: &'a TrainConfig,
-        dataset: &Dataset,
+        dataset: &'a Dataset,
         run_dir: &Path,
         options: &'a RunOptions,
         device: &Device,
     ) -> Result<Self> {
         config.validate()?;
         let training = match config.run.holdout {
-            Some(every) => dataset.subset(&dataset.holdout_split(every)?.0)?,
-            None => dataset.clone(),
+            Some(every) => Cow::Owned(dataset.subset(&dataset.holdout_split(every)?.0)?),
+            None => Cow::Borrowed(dataset),
         };
         let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
         if options.resume && !run_dir.exists() {
@@ -125,7 +127,7 @@ impl<'a> Trainer<'a> {
         let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
         let fitted = load_fitted_target(config, options, run_dir, dataset)?;
         let dataset = match &config.run.bounds {
-            Some(bounds) => training.in_model_cube(bounds)?,
+            Some(bounds) => Cow::Owned(training.in_model_cube(bounds)?),
             None => training,
         };
         crate::io::create_dir(run_dir)?;
@@ -233,7 +235,7 @@ impl<'a> Trainer<'a> {
             let mut progress = progress(
                 self.config,
                 &self.state,
-                n,
+                (n, self.state.iteration),
                 losses,
                 self.state.current_seconds,
                 Event::Step,
@@ -280,7 +282,7 @@ impl<'a> Trainer<'a> {
         let progress = progress(
             self.config,
             &self.state,
-            n,
+            (n, schedule.iterations),
             StepLosses::default(),
             seconds,
             done,
@@ -306,12 +308,11 @@ impl<'a> Trainer<'a> {
         let mut progress = progress(
             config,
             &self.state,
-            last,
+            (last, config.scale_schedule(last).iterations),
             StepLosses::default(),
             0.0,
             Event::ReconstructionFitting,
         );
-        progress.iteration = config.scale_schedule(last).iterations;
         if config.schedule.reconstruction_fit_steps > 0
             && self.model.reconstruction_detail().is_none()
         {
@@ -398,25 +399,20 @@ fn checkpoint_due(config: &TrainConfig, state: &TrainState, last_checkpoint: &In
     by_time || by_count
 }
 
-/// Progress of scale `n` after its latest iteration (its last, when it is done).
+/// Progress of scale `n` after `iteration` of its iterations.
 fn progress(
     config: &TrainConfig,
     state: &TrainState,
-    n: usize,
+    (n, iteration): (usize, usize),
     losses: StepLosses,
     seconds: f64,
     event: Event,
 ) -> Progress {
-    let iterations = config.scale_schedule(n).iterations;
     Progress {
         scale: n,
         scales: config.scales(),
-        iteration: if matches!(event, Event::ScaleDone(_)) {
-            iterations
-        } else {
-            state.iteration
-        },
-        iterations,
+        iteration,
+        iterations: config.scale_schedule(n).iterations,
         losses,
         scale_seconds: seconds,
         total_seconds: total_seconds(state),
