@@ -488,3 +488,103 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     ]));
     assert!(err.contains("holdout") && err.contains(">= 2"), "{err}");
 }
+
+/// `--family N` scores N other layouts of the dataset's built-in scene with the same functions
+/// (its own layout, put in the family by hand, scores as the real views do), and `--vary-from`
+/// keeps V*'s noise below the given scale, in `eval` as in `sample`.
+#[test]
+fn the_family_row_scores_other_layouts_and_vary_from_is_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, run) = train_micro(tmp.path());
+    let mut args = small_eval(&[&run], &data);
+    args.extend(["--family", "2"]);
+    let text = ok(&volgen(&args));
+    assert!(
+        text.contains("family: 2 other layouts of the built-in `stones` scene (seeds 1..=2)"),
+        "{text}"
+    );
+    let family = json(&run.join("eval.json"))["family"].clone();
+    assert_eq!(family["scene"], "stones");
+    assert_eq!(family["seeds"], serde_json::json!([1, 2]));
+    for key in ["colour_swd", "floaters", "layout_distance", "diversity_mv"] {
+        let value = family[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key}: {family}"));
+        assert!(value.is_finite() && value >= 0.0, "{key}: {family}");
+    }
+
+    // A record whose seed comes just before the dataset's own (0): the family's one layout is
+    // the dataset's scene, seen as its files show it but for their 8-bit rounding.
+    let transforms = data.join("transforms.json");
+    let mut record = json(&transforms);
+    assert_eq!(record["volgen_scene"]["seed"], 0);
+    record["volgen_scene"]["seed"] = serde_json::json!(u64::MAX);
+    std::fs::write(&transforms, record.to_string()).unwrap();
+    let mut args = small_eval(&[&run], &data);
+    args.extend(["--family", "1"]);
+    ok(&volgen(&args));
+    let family = json(&run.join("eval.json"))["family"].clone();
+    assert_eq!(family["seeds"], serde_json::json!([0]));
+    let colour = family["colour_swd"].as_f64().unwrap();
+    let floaters = family["floaters"].as_f64().unwrap();
+    assert!(colour < 2e-3 && floaters < 1e-3, "{family}");
+
+    // Two runs: one table, the family's row last, dashes where V*'s numbers stand.
+    let mut args = small_eval(&[&run, &run], &data);
+    args.extend(["--family", "1"]);
+    let text = ok(&volgen(&args));
+    let lines: Vec<&str> = text.lines().filter(|l| l.starts_with('|')).collect();
+    assert_eq!(lines.len(), 5, "{text}");
+    assert!(
+        lines[4].starts_with("| family: 1 other layouts of `stones` | - |"),
+        "{text}"
+    );
+    assert_eq!(lines[4].matches('|').count(), 14, "{text}");
+
+    // A dataset that records no built-in scene has no family.
+    record.as_object_mut().unwrap().remove("volgen_scene");
+    std::fs::write(&transforms, record.to_string()).unwrap();
+    let err = failure(&volgen(&args));
+    assert!(err.contains("volgen_scene"), "{err}");
+    // A malformed record names the file and the field.
+    record["volgen_scene"] = serde_json::json!({"name": "forest", "seed": 1, "grid": 8});
+    std::fs::write(&transforms, record.to_string()).unwrap();
+    let err = failure(&volgen(&small_eval(&[&run], &data)));
+    assert!(
+        err.contains("transforms.json") && err.contains("volgen_scene"),
+        "{err}"
+    );
+    record.as_object_mut().unwrap().remove("volgen_scene");
+    std::fs::write(&transforms, record.to_string()).unwrap();
+
+    // --vary-from: recorded in eval.json, and refused beyond the model's 3D scales (micro: 2).
+    let mut args = small_eval(&[&run], &data);
+    args.extend(["--vary-from", "2"]);
+    let text = ok(&volgen(&args));
+    assert!(text.contains("scenes vary from 3D scale 2"), "{text}");
+    assert_eq!(json(&run.join("eval.json"))["vary_from"], 2);
+    let mut args = small_eval(&[&run], &data);
+    args.extend(["--vary-from", "3"]);
+    let err = failure(&volgen(&args));
+    assert!(err.contains("vary_from") && err.contains("1 to 2"), "{err}");
+    let out = tmp.path().join("kept");
+    let sample = |vary_from: &str| {
+        volgen(&[
+            "sample",
+            path(&run),
+            "--count",
+            "2",
+            "--vary-from",
+            vary_from,
+            "--out",
+            path(&out),
+        ])
+    };
+    ok(&sample("2"));
+    assert!(out.join("scene_1.safetensors").is_file());
+    let err = failure(&sample("0"));
+    assert!(
+        err.contains("--vary-from") && err.contains("1 to 2"),
+        "{err}"
+    );
+}

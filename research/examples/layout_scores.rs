@@ -4,54 +4,56 @@
 //! the stones-only check of the arrangement issue (the share of grey matter inside the ring).
 //! Used for docs/journal/2026-12-arrangement.md.
 //!
-//! `cargo run --release -p research --example layout_scores -- RUN [LAYOUTS] [SCENES] [GRID]`
-//! (defaults: 32 layouts, 32 scenes, grid 28; the reference is the seed-0 scene baked at GRID^3,
-//! as a fit of its views would see it at the model's resolution).
+//! `cargo run --release -p research --example layout_scores -- RUN DATASET [LAYOUTS] [SCENES]
+//! [GRID] [PICTURE.png]` (defaults: 32 layouts, 32 scenes, grid 28; with PICTURE, a top-down
+//! view of two true layouts, V* and six generated scenes). Each volume is scored against two
+//! references, the seed-0 scene baked at GRID^3 and a direct fit of DATASET's views as `volgen
+//! eval` makes it, with both weightings of its matter (opacity; seen from above).
 
 use candle_core::Device;
 use radiance_volume::GridDims;
 use rand::SeedableRng;
+use research::stone_shares;
 use rgbd_dataset::scenes::{Scene, StandingStones};
-use scene_metrics::{layout_distance, LayoutPoints, LAYOUT_DIRECTIONS};
+use rgbd_dataset::Dataset;
+use scene_metrics::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
 use singrav::SinGrav;
 
-/// Grey matter (stone colour: low chroma, not dark soil) by distance from the vertical axis:
-/// the share inside the ring (r < 0.4) and on it (0.45 < r < 0.8).
-fn stone_shares(volume: &radiance_volume::RadianceVolume) -> (f64, f64) {
-    let n = volume.dims().xyz()[0];
-    let voxel = 2.0 / n as f64;
-    let values: Vec<f32> = volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
-    let cells = n * n * n;
-    let (mut inside, mut ring, mut total) = (0.0, 0.0, 0.0);
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let i = (z * n + y) * n + x;
-                let opacity = 1.0 - (-f64::from(values[i]) * voxel).exp();
-                let rgb = [1, 2, 3].map(|c| values[c * cells + i]);
-                let chroma = rgb.iter().copied().fold(f32::MIN, f32::max)
-                    - rgb.iter().copied().fold(f32::MAX, f32::min);
-                let bright = rgb.iter().sum::<f32>() / 3.0;
-                if opacity < 1e-3 || chroma > 0.12 || bright < 0.25 {
-                    continue;
-                }
-                let centre = |i: usize| (2.0 * (i as f64 + 0.5) / n as f64) - 1.0;
-                let r = centre(x).hypot(centre(y));
-                total += opacity;
-                if r < 0.4 {
-                    inside += opacity;
-                } else if (0.45..0.8).contains(&r) {
-                    ring += opacity;
-                }
-            }
-        }
-    }
-    (inside / total.max(1e-12), ring / total.max(1e-12))
+/// A straight-down view of `volume` on white, `(3, 96, 96)`.
+fn top_down(volume: &radiance_volume::RadianceVolume) -> candle_core::Tensor {
+    let size = 96;
+    let camera = volrender::Camera::look_at(
+        glam::Vec3::new(0.0, 0.0, 3.5),
+        glam::Vec3::ZERO,
+        glam::Vec3::Y,
+        size,
+        size,
+        0.62,
+    )
+    .unwrap();
+    let config = volrender::RenderConfig::default().with_background([1.0; 3]);
+    let image = volrender::render_image(volume, &camera, &config).unwrap();
+    let planes: Vec<f32> = (0..3)
+        .flat_map(|c| image.rgb.iter().map(move |p| p[c]))
+        .collect();
+    candle_core::Tensor::from_vec(planes, (3, size, size), &Device::Cpu).unwrap()
 }
 
-fn points(volume: &radiance_volume::RadianceVolume) -> LayoutPoints {
+/// `volume` with every colour 0: its matter by position alone.
+fn colourless(volume: &radiance_volume::RadianceVolume) -> radiance_volume::RadianceVolume {
+    let density = volume.tensor().narrow(0, 0, 1).unwrap();
+    let black = density.zeros_like().unwrap().repeat((3, 1, 1, 1)).unwrap();
+    volume
+        .with_tensor(candle_core::Tensor::cat(&[&density, &black], 0).unwrap())
+        .unwrap()
+}
+
+/// The two weightings compared, in column order.
+const WEIGHTINGS: [LayoutWeighting; 2] = [LayoutWeighting::Opacity, LayoutWeighting::SeenFromAbove];
+
+fn points(volume: &radiance_volume::RadianceVolume, weighting: LayoutWeighting) -> LayoutPoints {
     let voxel = 2.0 / volume.dims().xyz()[0] as f32;
-    LayoutPoints::from_volume(volume.tensor(), voxel).unwrap()
+    LayoutPoints::from_volume_weighted(volume.tensor(), voxel, weighting).unwrap()
 }
 
 /// Mean and standard deviation.
@@ -63,47 +65,122 @@ fn stats(values: &[f64]) -> (f64, f64) {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let run = args
-        .first()
-        .expect("usage: layout_scores RUN [LAYOUTS] [SCENES] [GRID]");
+    let usage = "usage: layout_scores RUN DATASET [LAYOUTS] [SCENES] [GRID]";
+    let (run, dataset) = (args.first().expect(usage), args.get(1).expect(usage));
     let arg = |i: usize, default: usize| args.get(i).map_or(default, |a| a.parse().unwrap());
-    let (layouts, scenes, grid) = (arg(1, 32), arg(2, 32), arg(3, 28));
+    let (layouts, scenes, grid) = (arg(2, 32), arg(3, 32), arg(4, 28));
     let dims = GridDims::cube(grid);
+    let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
+    let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
+    let fit = singrav::train::fit_training_target(model.config(), &data, None, &mut |_| {})
+        .unwrap()
+        .volume;
     let scene = StandingStones::new(0).to_volume(dims).unwrap();
-    let reference = points(&scene);
+    // (reference, weighting) pairs in column order, then the fit seen from above by position
+    // alone (every colour set to 0).
+    let mut references: Vec<(LayoutPoints, LayoutWeighting)> = [&scene, &fit]
+        .iter()
+        .flat_map(|volume| WEIGHTINGS.map(|w| (points(volume, w), w)))
+        .collect();
+    references.push((
+        points(&colourless(&fit), LayoutWeighting::SeenFromAbove),
+        LayoutWeighting::SeenFromAbove,
+    ));
     let score = |volume: &radiance_volume::RadianceVolume| {
-        let distance = layout_distance(&reference, &points(volume), LAYOUT_DIRECTIONS, 0).unwrap();
-        let (inside, ring) = stone_shares(volume);
-        (distance, inside, ring)
+        let last = references.len() - 1;
+        let distances: Vec<f64> = references
+            .iter()
+            .enumerate()
+            .map(|(i, (reference, w))| {
+                let own = if i == last {
+                    points(&colourless(volume), *w)
+                } else {
+                    points(volume, *w)
+                };
+                layout_distance(reference, &own, LAYOUT_DIRECTIONS, 0).unwrap()
+            })
+            .collect();
+        (distances, stone_shares(volume))
     };
-    let row = |name: &str, scores: &[(f64, f64, f64)]| {
-        let d: Vec<f64> = scores.iter().map(|s| s.0).collect();
-        let inside: Vec<f64> = scores.iter().map(|s| s.1).collect();
-        let ring: Vec<f64> = scores.iter().map(|s| s.2).collect();
-        let (dm, ds) = stats(&d);
+    // The pooled matter of a set of volumes against each reference.
+    let pooled_row = |name: &str, volumes: &[radiance_volume::RadianceVolume]| {
+        let last = references.len() - 1;
+        let cells: Vec<String> = references
+            .iter()
+            .enumerate()
+            .map(|(i, (reference, w))| {
+                let sets: Vec<LayoutPoints> = volumes
+                    .iter()
+                    .map(|v| {
+                        if i == last {
+                            points(&colourless(v), *w)
+                        } else {
+                            points(v, *w)
+                        }
+                    })
+                    .collect();
+                let pooled = LayoutPoints::pooled(&sets);
+                format!(
+                    "{:.4}",
+                    layout_distance(reference, &pooled, LAYOUT_DIRECTIONS, 0).unwrap()
+                )
+            })
+            .collect();
         println!(
-            "| {name} | {} | {dm:.4} ± {ds:.4} | {:.1}% | {:.1}% |",
+            "| {name}, pooled | {} | {} | |",
+            volumes.len(),
+            cells.join(" | ")
+        );
+    };
+    let row = |name: &str, scores: &[(Vec<f64>, (f64, f64))]| {
+        let cells: Vec<String> = (0..references.len())
+            .map(|c| {
+                let (m, sd) = stats(&scores.iter().map(|s| s.0[c]).collect::<Vec<_>>());
+                format!("{m:.4} ± {sd:.4}")
+            })
+            .collect();
+        let inside: Vec<f64> = scores.iter().map(|s| s.1 .0).collect();
+        println!(
+            "| {name} | {} | {} | {:.1}% |",
             scores.len(),
-            100.0 * stats(&ring).0,
+            cells.join(" | "),
             100.0 * stats(&inside).0
         );
     };
-    println!("| volumes | count | layout distance (mean ± s.d.) | stone matter on the ring | inside the ring |");
-    println!("|---|---|---|---|---|");
+    println!("| volumes | count | to the scene, opacity | to the scene, seen from above | to the fit, opacity | to the fit, seen from above | to the fit, seen from above, position only | stone matter inside the ring |");
+    println!("|---|---|---|---|---|---|---|---|");
     row("the scene (seed 0)", &[score(&scene)]);
-    let truth: Vec<_> = (1..=layouts as u64)
-        .map(|seed| score(&StandingStones::new(seed).to_volume(dims).unwrap()))
+    row("its fit", &[score(&fit)]);
+    let truth_volumes: Vec<_> = (1..=layouts as u64)
+        .map(|seed| StandingStones::new(seed).to_volume(dims).unwrap())
         .collect();
+    let truth: Vec<_> = truth_volumes.iter().map(score).collect();
     row("other layouts of the scene", &truth);
-    let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
+    pooled_row("other layouts of the scene", &truth_volumes);
     let v_star = model.to_physical(&model.reconstruct().unwrap()).unwrap();
     row("V*", &[score(&v_star)]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let samples: Vec<_> = (0..scenes)
+    let sample_volumes: Vec<_> = (0..scenes)
         .map(|_| {
             let raw = model.generate_random(&mut rng).unwrap();
-            score(&model.to_physical(&raw).unwrap())
+            model.to_physical(&raw).unwrap()
         })
         .collect();
+    let samples: Vec<_> = sample_volumes.iter().map(score).collect();
     row("generated scenes", &samples);
+    pooled_row("generated scenes", &sample_volumes);
+    if let Some(picture) = args.get(5) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut views: Vec<_> = [1, 2]
+            .iter()
+            .map(|&seed| top_down(&StandingStones::new(seed).to_volume(dims).unwrap()))
+            .collect();
+        views.push(top_down(&v_star));
+        for _ in 0..6 {
+            let raw = model.generate_random(&mut rng).unwrap();
+            views.push(top_down(&model.to_physical(&raw).unwrap()));
+        }
+        singrav::picture::write_grid(picture.as_ref(), &[views]).unwrap();
+        println!("top-down views (layouts 1 and 2, V*, six scenes) -> {picture}");
+    }
 }

@@ -37,6 +37,10 @@ pub struct AnimateArgs {
     /// moves scales from 3 on.
     #[arg(long, value_name = "N", default_value_t = WalkConfig::default().first_moving_scale)]
     first_moving_scale: usize,
+    /// Scales below N take the reconstruction's noise in every frame: V*'s layout, animated
+    /// above it (1: the first frame is a random scene).
+    #[arg(long, value_name = "N", default_value_t = WalkConfig::default().vary_from)]
+    vary_from: usize,
     #[command(flatten)]
     outputs: Outputs,
     /// Also write the frames' views as one looping animated GIF, `animation.gif`.
@@ -58,6 +62,7 @@ pub fn run(args: &AnimateArgs) -> Result<()> {
         anchor: args.anchor,
         momentum: args.momentum,
         first_moving_scale: args.first_moving_scale,
+        vary_from: args.vary_from,
     };
     let camera = showcase_cameras(1, model.render_size())?;
     let rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);

@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use candle_core::Tensor;
 use rgbd_dataset::scenes::SceneKind;
-use rgbd_dataset::{write_dataset, DatasetSpec};
+use rgbd_dataset::{write_built_in, DatasetSpec};
 use serde::Serialize;
 use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
 use singrav::sample::Sample;
@@ -17,7 +17,7 @@ use singrav::train::RunOptions;
 use singrav::SinGrav;
 
 use super::model_io::Outputs;
-use super::sample::{sample_to_dir, Views};
+use super::sample::{sample_to_dir, Draws, Views};
 use super::train::{load_dataset, train_with_progress, TrainOptions};
 
 /// Arguments of `volgen demo`.
@@ -47,7 +47,7 @@ const DEMO_TURNTABLE_FRAMES: usize = 36;
 
 /// The losses of the last logged iteration of a scale, as the table shows them (the log's
 /// names).
-const LOSS_COLUMNS: [(&str, &str); 15] = [
+const LOSS_COLUMNS: [(&str, &str); 14] = [
     ("color", "reconstruction"),
     ("depth", "depth"),
     ("opacity", "opacity"),
@@ -55,7 +55,6 @@ const LOSS_COLUMNS: [(&str, &str); 15] = [
     ("chroma_distribution", "chroma distribution"),
     ("height_profile", "height profile"),
     ("opacity_binary", "binary opacity"),
-    ("opacity_distribution", "opacity distribution"),
     ("critic", "critic"),
     ("penalty", "gradient penalty"),
     ("adversarial", "adversarial"),
@@ -110,8 +109,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         spec.views,
         dataset_dir.display()
     );
-    let scene = args.scene.build(args.train.seed);
-    write_dataset(scene.as_ref(), &dataset_dir, &spec)
+    write_built_in(args.scene, args.train.seed, &dataset_dir, &spec)
         .with_context(|| format!("writing the dataset to {}", dataset_dir.display()))?;
     let dataset_seconds = started.elapsed().as_secs_f64();
     let dataset = load_dataset(&dataset_dir, &config, None)?;
@@ -147,14 +145,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         upsample: None,
     };
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
-    let samples = sample_to_dir(
-        &model,
-        &views,
-        args.count,
-        args.train.seed,
-        &samples_dir,
-        outputs,
-    )?;
+    let draws = Draws {
+        count: args.count,
+        seed: args.train.seed,
+        vary_from: 1,
+    };
+    let samples = sample_to_dir(&model, &views, draws, &samples_dir, outputs)?;
     let overview = args.out.join("overview.png");
     let real = input_views_at_sample_size(&model, &dataset, input_views, &samples)?;
     write_overview(&overview, &real, &samples)?;

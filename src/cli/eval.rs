@@ -1,8 +1,9 @@
-//! `volgen eval RUN... --dataset DIR [--scenes N] [--views V] [--seed S] [--inception FILE]`:
-//! the quality numbers of trained models. Renders the fixed-noise reconstruction V* and
-//! generated scenes from cameras of the training dataset and compares them with the dataset's
-//! images from the same cameras (docs/metrics.md defines every number). With several runs, a
-//! Markdown table compares them, a row per run.
+//! `volgen eval RUN... --dataset DIR [--scenes N] [--views V] [--seed S] [--inception FILE]
+//! [--family N] [--vary-from N]`: the quality numbers of trained models. Renders the fixed-noise
+//! reconstruction V* and generated scenes from cameras of the training dataset and compares them
+//! with the dataset's images from the same cameras (docs/metrics.md defines every number). With
+//! several runs, a Markdown table compares them, a row per run. With `--family N`, N other
+//! layouts of the dataset's built-in scene are scored the same way, as a reference row.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +14,7 @@ use rgbd_dataset::DepthKind;
 use scene_metrics::{Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE};
 use serde::Serialize;
 use singrav::checkpoint::checkpoint_path;
-use singrav::eval::{evaluate, EvalConfig, Evaluation, LayoutReference};
+use singrav::eval::{evaluate, EvalConfig, Evaluation, LayoutReference, SceneScores};
 
 /// Arguments of `volgen eval`.
 #[derive(Debug, clap::Args)]
@@ -51,6 +52,15 @@ pub struct EvalArgs {
     /// `vstar` (the model's reconstruction).
     #[arg(long, value_name = "fit|vstar", default_value = "fit")]
     layout_reference: LayoutReference,
+    /// Also score N other layouts of the dataset's built-in scene (a dataset `volgen scene` or
+    /// `volgen demo` wrote), rendered from the same views with the same functions: what a
+    /// perfect generator of that kind of scene scores, a reference row.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    family: usize,
+    /// The coarsest 3D scale whose noise varies (as `volgen sample --vary-from`): scales below
+    /// it keep V*'s layout.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    vary_from: usize,
     /// InceptionV3 weights (torchvision's names, safetensors) for SIFID-MV; without them
     /// SIFID-MV is not computed.
     #[arg(long, value_name = "FILE")]
@@ -138,6 +148,8 @@ fn evaluate_model(
         views: args.views,
         seed: args.seed,
         layout_reference: args.layout_reference,
+        vary_from: args.vary_from,
+        family: args.family,
     };
     let numbers = evaluate(&model, &dataset, &config, block, &mut |i, n| {
         eprintln!("scene {i}/{n} rendered")
@@ -193,20 +205,49 @@ fn print_report(e: &Evaluation) {
         }
         _ => println!("held_out:                  none (train with --holdout N to measure)"),
     }
+    if e.vary_from > 1 {
+        println!(
+            "scenes vary from 3D scale {} (the coarser scales keep V*'s noise)",
+            e.vary_from
+        );
+    }
+    print_scores(&e.samples, e.image_size, &e.layout_reference);
+    if let Some(v_star) = e.reconstruction_layout_distance {
+        println!("reconstruction_layout:     {v_star:.4}  (V*'s own layout distance from the fit)");
+    }
+    println!(
+        "                           (± one standard error over the {} scenes: their sampling \
+         noise, not a difference between runs)",
+        e.scenes
+    );
+    if let Some(family) = &e.family {
+        println!(
+            "family: {} other layouts of the built-in `{}` scene (seeds {}..={}), seen from the \
+             same views: what a perfect generator of this scene scores",
+            family.seeds.len(),
+            family.scene,
+            family.seeds.first().copied().unwrap_or_default(),
+            family.seeds.last().copied().unwrap_or_default()
+        );
+        print_scores(&family.scores, e.image_size, &e.layout_reference);
+    }
+}
+
+/// The labelled lines of a set of scenes' sample metrics.
+fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
     match e.patch_swd_mv {
         Some(p) => println!(
             "patch_swd_mv:              {}  (lower = patches closer to the real views')",
             cell(Some(p), e.patch_swd_mv_stderr, 4)
         ),
         None => println!(
-            "patch_swd_mv:              not computed: views of {} pixels are below its \
-             {PATCH_SWD_MIN_SIDE}",
-            e.image_size
+            "patch_swd_mv:              not computed: views of {image_size} pixels are below \
+             its {PATCH_SWD_MIN_SIDE}"
         ),
     }
     println!(
         "colour_swd:                {}  (lower = colours closer to the real views')",
-        cell(Some(e.colour_swd), Some(e.colour_swd_stderr), 4)
+        cell(Some(e.colour_swd), e.colour_swd_stderr, 4)
     );
     match e.floaters {
         Some(f) => println!(
@@ -217,23 +258,15 @@ fn print_report(e: &Evaluation) {
     }
     println!(
         "layout_distance:           {}  (lower = matter placed as in the scene; against {})",
-        cell(Some(e.layout_distance), Some(e.layout_distance_stderr), 4),
-        match e.layout_reference.as_str() {
+        cell(Some(e.layout_distance), e.layout_distance_stderr, 4),
+        match layout_reference {
             "fit" => "a direct fit of the training views",
             _ => "V*",
         }
     );
-    if let Some(v_star) = e.reconstruction_layout_distance {
-        println!("reconstruction_layout:     {v_star:.4}  (V*'s own layout distance from the fit)");
-    }
     println!(
         "Diversity-MV:              {}  (higher = more varied scenes)",
-        cell(Some(e.diversity_mv), e.diversity_mv_stderr, 4)
-    );
-    println!(
-        "                           (± one standard error over the {} scenes: their sampling \
-         noise, not a difference between runs)",
-        e.scenes
+        cell(e.diversity_mv, e.diversity_mv_stderr, 4)
     );
     match e.sifid_mv {
         Some(s) => {
@@ -247,9 +280,9 @@ fn print_report(e: &Evaluation) {
 }
 
 /// One Markdown table, a row per model (as the paper's Table 1), "-" where a number was not
-/// computed; the sample metrics with their standard errors over scenes. With `mean`, a last row
-/// of each column's mean over the models and its standard error over them ("-" where a model
-/// lacks the number or it is infinite).
+/// computed; the sample metrics with their standard errors over scenes. With `mean`, a row of
+/// each column's mean over the models and its standard error over them ("-" where a model
+/// lacks the number or it is infinite). With a family, its row ends the table.
 fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
@@ -288,24 +321,50 @@ fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
             cells.join(" | ")
         ));
     }
+    if let Some(family) = evaluations.iter().find_map(|e| e.numbers.family.as_ref()) {
+        let cells: Vec<String> = std::iter::repeat_n("-".to_string(), 6)
+            .chain(
+                sample_columns(&family.scores)
+                    .iter()
+                    .map(|&(value, stderr, digits)| cell(value, stderr, digits)),
+            )
+            .collect();
+        table.push_str(&format!(
+            "| family: {} other layouts of `{}` | {} |\n",
+            family.seeds.len(),
+            family.scene,
+            cells.join(" | ")
+        ));
+    }
     table
 }
 
-/// The table's numbers of one model, in its column order: value, standard error over scenes
-/// (the sample metrics), decimals shown.
-fn columns(e: &Evaluation) -> [(Option<f64>, Option<f64>, usize); 12] {
-    [
+/// A table column's number: value, standard error over scenes (the sample metrics), decimals
+/// shown.
+type Column = (Option<f64>, Option<f64>, usize);
+
+/// The table's numbers of one model, in its column order.
+fn columns(e: &Evaluation) -> Vec<Column> {
+    let mut columns = vec![
         (Some(e.reconstruction_psnr), None, 2),
         (Some(e.reconstruction_ssim), None, 4),
         (Some(e.reconstruction_depth_rmse), None, 4),
         (Some(e.volume_psnr), None, 2),
         (e.held_out_psnr, None, 2),
         (e.held_out_ssim, None, 4),
+    ];
+    columns.extend(sample_columns(&e.samples));
+    columns
+}
+
+/// The sample metrics' columns of the table.
+fn sample_columns(e: &SceneScores) -> [Column; 6] {
+    [
         (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
-        (Some(e.colour_swd), Some(e.colour_swd_stderr), 4),
+        (Some(e.colour_swd), e.colour_swd_stderr, 4),
         (e.floaters, e.floaters_stderr, 4),
-        (Some(e.layout_distance), Some(e.layout_distance_stderr), 4),
-        (Some(e.diversity_mv), e.diversity_mv_stderr, 4),
+        (Some(e.layout_distance), e.layout_distance_stderr, 4),
+        (e.diversity_mv, e.diversity_mv_stderr, 4),
         (e.sifid_mv, None, 4),
     ]
 }

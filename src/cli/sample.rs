@@ -1,7 +1,8 @@
 //! `volgen sample MODEL --count N --seed S --out DIR [--reconstruction] [--turntable F]`:
 //! generate new scenes from a trained model as radiance volumes (safetensors, plus VDB / EXR
 //! slices on request) with PNG views; with `--reconstruction`, also the fixed-noise
-//! reconstruction V*; with `--turntable F`, an animated GIF per scene, a camera orbit of F frames.
+//! reconstruction V*; with `--turntable F`, an animated GIF per scene, a camera orbit of F frames;
+//! with `--vary-from N`, scenes that keep V*'s layout below 3D scale N and vary above it.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +37,11 @@ pub struct SampleArgs {
     /// `reconstruction.*`, in the same formats (`--count 0` writes it alone).
     #[arg(long)]
     reconstruction: bool,
+    /// The coarsest 3D scale whose noise varies: scales below it take the reconstruction's
+    /// noise, so every scene keeps V*'s layout and only finer structure varies (1: everything
+    /// varies). The same seed gives the same finer noise whatever N.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    vary_from: usize,
     /// Also write each scene as an animated GIF (`scene_i.gif`): a full camera orbit at the
     /// showcase views' elevation, in this many frames.
     #[arg(long, value_name = "FRAMES")]
@@ -52,6 +58,7 @@ pub fn run(args: &SampleArgs) -> Result<()> {
         "--turntable: expected at least 1 frame, got 0"
     );
     let model = load_model(&args.model)?;
+    check_vary_from(&model, args.vary_from)?;
     let views = Views::new(&model, args.views, args.turntable)?;
     if args.reconstruction {
         let mut v_star = model.reconstruction_sample(&views.cameras)?;
@@ -72,11 +79,24 @@ pub fn run(args: &SampleArgs) -> Result<()> {
     sample_to_dir(
         &model,
         &views,
-        args.count,
-        args.seed,
+        Draws {
+            count: args.count,
+            seed: args.seed,
+            vary_from: args.vary_from,
+        },
         &args.out,
         args.outputs,
     )?;
+    Ok(())
+}
+
+/// Refuses a `--vary-from` that is not one of the model's 3D scales, before anything is written.
+pub fn check_vary_from(model: &SinGrav, vary_from: usize) -> Result<()> {
+    let scales = model.volume_scales();
+    ensure!(
+        (1..=scales).contains(&vary_from),
+        "--vary-from: expected one of the model's 3D scales 1 to {scales}, got {vary_from}"
+    );
     Ok(())
 }
 
@@ -115,21 +135,29 @@ impl Views {
     }
 }
 
-/// Generates `count` scenes seen from `views` into `dir` (`scene_i.safetensors`, `scene_i.png`,
-/// `scene_i.gif` with a turntable, and VDB / EXR when asked), printing each scene's generation
-/// time. The samples returned hold the shown views only.
+/// Which scenes [`sample_to_dir`] generates: `count` of them from `seed`'s noise, varying from
+/// 3D scale `vary_from` on.
+#[derive(Debug, Clone, Copy)]
+pub struct Draws {
+    pub count: usize,
+    pub seed: u64,
+    pub vary_from: usize,
+}
+
+/// Generates the scenes of `draws` seen from `views` into `dir` (`scene_i.safetensors`,
+/// `scene_i.png`, `scene_i.gif` with a turntable, and VDB / EXR when asked), printing each
+/// scene's generation time. The samples returned hold the shown views only.
 pub fn sample_to_dir(
     model: &SinGrav,
     views: &Views,
-    count: usize,
-    seed: u64,
+    draws: Draws,
     dir: &Path,
     outputs: Outputs,
 ) -> Result<Vec<Sample>> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut samples = Vec::with_capacity(count);
-    for i in 0..count {
-        let mut sample = model.sample(&mut rng, &views.cameras)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(draws.seed);
+    let mut samples = Vec::with_capacity(draws.count);
+    for i in 0..draws.count {
+        let mut sample = model.sample_varying_from(&mut rng, &views.cameras, draws.vary_from)?;
         let files = write_sample(
             model,
             dir,

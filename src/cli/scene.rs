@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use rgbd_dataset::scenes::SceneKind;
-use rgbd_dataset::{write_dataset, DatasetSpec};
+use rgbd_dataset::{write_built_in, DatasetSpec};
 
 /// Arguments of `volgen scene`.
 #[derive(Debug, clap::Args)]
@@ -37,8 +37,7 @@ pub fn run(args: &SceneArgs) -> Result<()> {
         grid: args.grid,
         seed: args.seed,
     };
-    let scene = args.name.build(args.seed);
-    let summary = write_dataset(scene.as_ref(), &args.out, &spec)
+    let summary = write_built_in(args.name, args.seed, &args.out, &spec)
         .with_context(|| format!("writing the `{}` dataset", args.name))?;
     println!(
         "wrote {} views of `{}` at {}x{} in {:.1} s: {}",

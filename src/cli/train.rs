@@ -114,9 +114,10 @@ pub struct TrainOptions {
     /// --fit on one without, 10).
     #[arg(long, value_name = "W")]
     pub lambda_fitted: Option<f64>,
-    /// Weight of a 3D patch critic's adversarial term at every 3D scale: it judges generated
-    /// volumes against the fitted volume (needs --fitted or --fit; --lambda-fitted 0 keeps the
-    /// critic without the 3D comparison of the reconstruction). Default 0: no 3D critic.
+    /// Weight of a 3D patch critic's adversarial term: it judges generated volumes against a
+    /// fitted volume (--fitted, or one fitted first) at every 3D scale, or up to
+    /// `--set critics.volume_until_scale=N` (1: where the layout is made). Default 0: no 3D
+    /// critic.
     #[arg(long, value_name = "W")]
     pub lambda_volume_critic: Option<f64>,
     /// The 3D critic also judges opacity-weighted colour per voxel, not only opacity.

@@ -37,6 +37,10 @@
 //!   `depth_scale` (world units per count, required for PNG depth: millimetre PNGs are 0.001)
 //!   give the depth, or an `.exr` file (single- or multi-part) whose channel `Z` or ending in `.Z`
 //!   (Blender's `ViewLayer.Depth.Z`), or else `Y`, or else `R`, holds depth in world units.
+//! - `volgen_scene` (optional): the built-in scene the dataset was rendered from,
+//!   `{"name": "stones", "seed": 0, "grid": 128}` ([`write_built_in`] writes it; `volgen eval
+//!   --family` renders the scene's other layouts from its cameras); a malformed record is an
+//!   error naming the field.
 //! - `depth_kind` (required, or `volgen train --depth-kind KIND`, which overrides it; volgen
 //!   writes it in every dataset it makes): how the depth maps measure depth.
 //!   - `"expected"`: the renderer's expected depth along the ray, `sum_i w_i t_i` (t is the
@@ -93,14 +97,19 @@ mod error;
 mod io;
 mod load;
 mod pixels;
+mod rendered;
 mod resize;
 pub mod scenes;
+mod source;
 mod write;
 
 pub use bounds::SceneBounds;
 pub use depth::DepthKind;
 pub use error::{Error, Result};
-pub use write::{render_config, write_dataset, DatasetSpec, DatasetSummary, DEPTH_SCALE};
+pub use source::SceneSource;
+pub use write::{
+    render_config, write_built_in, write_dataset, DatasetSpec, DatasetSummary, DEPTH_SCALE,
+};
 
 use resize::resize_plane;
 
@@ -126,6 +135,7 @@ pub struct Dataset {
     names: Vec<String>,
     frames: Vec<FramePixels>,
     depth_kind: DepthKind,
+    source: Option<SceneSource>,
 }
 
 /// How [`Dataset::load_with`] reads a dataset.
@@ -254,6 +264,13 @@ impl Dataset {
         self.height
     }
 
+    /// The built-in scene the dataset shows, when `transforms.json` records one
+    /// ([`write_built_in`] does; `None` for every other dataset).
+    #[must_use]
+    pub fn scene_source(&self) -> Option<SceneSource> {
+        self.source
+    }
+
     /// The frames' cameras, at the files' resolution.
     #[must_use]
     pub fn cameras(&self) -> &[Camera] {
@@ -302,6 +319,7 @@ impl Dataset {
             names: indices.iter().map(|&i| self.names[i].clone()).collect(),
             frames: indices.iter().map(|&i| self.frames[i].clone()).collect(),
             depth_kind: self.depth_kind,
+            source: self.source,
         })
     }
 

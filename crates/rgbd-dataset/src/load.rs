@@ -9,6 +9,7 @@ use volrender::Camera;
 
 use super::depth::{to_expected, Converted, DepthKind, KINDS_EXPLAINED, MAX_HOLE_FRACTION};
 use super::pixels::{read_depth_exr, read_depth_png, read_rgba, Pixels};
+use super::source::{SceneSource, SOURCE_FIELD};
 use super::{transforms_file, Dataset, FramePixels, LoadOptions};
 use crate::error::{io_error, Error, Result};
 
@@ -76,6 +77,10 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         ),
     };
     let declared = declared_size(&root, &path)?;
+    let source = root
+        .get(SOURCE_FIELD)
+        .map(|record| SceneSource::from_json(record, &path))
+        .transpose()?;
     let base = path.parent().unwrap_or(Path::new("."));
 
     let mut size = declared;
@@ -154,6 +159,7 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         names,
         frames: pixels,
         depth_kind: kind,
+        source,
     })
 }
 

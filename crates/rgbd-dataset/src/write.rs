@@ -12,7 +12,8 @@ use volrender::{render_image, Camera, Image, RenderConfig, Sampler, PAPER_FOV_DE
 use super::pixels::encode_png;
 use crate::error::{invalid, Result};
 use crate::io::{create_dir, write_bytes};
-use crate::scenes::Scene;
+use crate::scenes::{Scene, SceneKind};
+use crate::source::{SceneSource, SOURCE_FIELD};
 
 /// World units per count of the 16-bit depth PNGs [`write_dataset`] writes (depths up to 6.55).
 pub const DEPTH_SCALE: f32 = 1e-4;
@@ -92,6 +93,45 @@ pub fn render_config() -> RenderConfig {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Result<DatasetSummary> {
+    write_recorded(scene, None, dir, spec)
+}
+
+/// Writes the built-in scene `kind` laid out from `layout_seed` as [`write_dataset`] does, and
+/// records it in `transforms.json` ([`SceneSource`]), so that its other layouts can be rendered
+/// from the same cameras ([`Dataset::scene_source`](crate::Dataset::scene_source)); what
+/// `volgen scene` writes.
+///
+/// ```
+/// use rgbd_dataset::{write_built_in, Dataset, DatasetSpec};
+/// use rgbd_dataset::scenes::SceneKind;
+/// let dir = tempfile::tempdir()?;
+/// let spec = DatasetSpec { views: 2, resolution: 8, grid: 16, seed: 2 };
+/// write_built_in(SceneKind::Mushrooms, 5, dir.path(), &spec)?;
+/// let source = Dataset::load(dir.path(), [1.0; 3])?.scene_source().unwrap();
+/// assert_eq!((source.kind, source.seed, source.grid), (SceneKind::Mushrooms, 5, 16));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn write_built_in(
+    kind: SceneKind,
+    layout_seed: u64,
+    dir: &Path,
+    spec: &DatasetSpec,
+) -> Result<DatasetSummary> {
+    let source = SceneSource {
+        kind,
+        seed: layout_seed,
+        grid: spec.grid,
+    };
+    write_recorded(kind.build(layout_seed).as_ref(), Some(source), dir, spec)
+}
+
+/// [`write_dataset`], with the scene's record when it is a built-in one.
+fn write_recorded(
+    scene: &dyn Scene,
+    source: Option<SceneSource>,
+    dir: &Path,
+    spec: &DatasetSpec,
+) -> Result<DatasetSummary> {
     let start = Instant::now();
     if spec.views == 0 || spec.resolution == 0 || spec.grid < 2 {
         return Err(invalid(
@@ -138,7 +178,7 @@ pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Resul
             }))
         })
         .collect::<Result<Vec<_>>>()?;
-    let transforms = json!({
+    let mut transforms = json!({
         "camera_angle_x": fov_x,
         "w": spec.resolution,
         "h": spec.resolution,
@@ -146,6 +186,9 @@ pub fn write_dataset(scene: &dyn Scene, dir: &Path, spec: &DatasetSpec) -> Resul
         "depth_kind": "expected",
         "frames": frames,
     });
+    if let Some(source) = source {
+        transforms[SOURCE_FIELD] = source.to_json();
+    }
     let text = serde_json::to_string_pretty(&transforms)
         .map_err(|e| invalid("transforms.json", e.to_string()))?;
     write_bytes(&transforms_path, text.as_bytes())?;

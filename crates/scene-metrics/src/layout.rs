@@ -9,6 +9,13 @@
 //! of the exact 1D W1 distance between the projections. Matter moved by `d` in position costs
 //! about `d` (times the directions' share of that axis), so a scene with the same kinds of matter
 //! in other places scores far, and one with the same layout and other details near.
+//!
+//! Weighting by opacity alone counts matter no camera sees: the inside of solid ground, or the
+//! fog a fit of views leaves below the surface, outweighs the objects on top.
+//! [`LayoutWeighting::SeenFromAbove`] (what `volgen eval` uses) weights each voxel by the light
+//! it stops of a ray coming straight down from the top of the box, `opacity x transmittance
+//! above it`, so only the matter a camera above the scene sees counts: the ground's surface,
+//! the tops and upper sides of what stands on it.
 
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -18,6 +25,17 @@ use crate::error::{invalid, Result};
 
 /// Coordinates of a layout point: position (3) and colour (3).
 const DIMS: usize = 6;
+
+/// How [`LayoutPoints::from_volume_weighted`] weights a voxel's point.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum LayoutWeighting {
+    /// Its opacity `1 - exp(-sigma * voxel)`: all matter, seen or hidden.
+    Opacity,
+    /// Its opacity times the transmittance of the voxels above it (the box's z axis is up):
+    /// the matter a ray straight down from the top of the box meets.
+    #[default]
+    SeenFromAbove,
+}
 
 /// A volume's matter as weighted points, ready for [`layout_distance`].
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +63,30 @@ impl LayoutPoints {
     /// # Ok::<(), scene_metrics::Error>(())
     /// ```
     pub fn from_volume(volume: &Tensor, voxel: f32) -> Result<Self> {
+        Self::from_volume_weighted(volume, voxel, LayoutWeighting::Opacity)
+    }
+
+    /// The matter of a physical volume as [`LayoutPoints::from_volume`] takes it, each voxel
+    /// weighted as `weighting` says; voxels of weight below `1e-4` are left out.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use scene_metrics::{LayoutPoints, LayoutWeighting};
+    /// // A column of two opaque voxels (z = 0 below z = 1): seen from above, only the top one.
+    /// let mut values = vec![0f32; 4 * 2];
+    /// values[0] = 100.0;
+    /// values[1] = 100.0;
+    /// let column = Tensor::from_vec(values, (4, 2, 1, 1), &Device::Cpu)?;
+    /// let seen = LayoutPoints::from_volume_weighted(&column, 1.0, LayoutWeighting::SeenFromAbove)?;
+    /// assert_eq!(seen.len(), 1);
+    /// assert_eq!(LayoutPoints::from_volume(&column, 1.0)?.len(), 2);
+    /// # Ok::<(), scene_metrics::Error>(())
+    /// ```
+    pub fn from_volume_weighted(
+        volume: &Tensor,
+        voxel: f32,
+        weighting: LayoutWeighting,
+    ) -> Result<Self> {
         let (channels, d, h, w) = volume.dims4()?;
         if channels < 4 {
             return Err(invalid(
@@ -62,7 +104,9 @@ impl LayoutPoints {
         let cells = d * h * w;
         let centre = |i: usize, n: usize| (2.0 * (i as f32 + 0.5) / n as f32) - 1.0;
         let (mut points, mut weights) = (Vec::new(), Vec::new());
-        for z in 0..d {
+        // Per column (x, y), the transmittance from the top of the box down to the current z.
+        let mut transmittance = vec![1f64; h * w];
+        for z in (0..d).rev() {
             for y in 0..h {
                 for x in 0..w {
                     let cell = (z * h + y) * w + x;
@@ -74,7 +118,13 @@ impl LayoutPoints {
                         ));
                     }
                     let opacity = 1.0 - (-f64::from(sigma) * f64::from(voxel)).exp();
-                    if opacity < 1e-4 {
+                    let above = &mut transmittance[y * w + x];
+                    let weight = match weighting {
+                        LayoutWeighting::Opacity => opacity,
+                        LayoutWeighting::SeenFromAbove => opacity * *above,
+                    };
+                    *above *= 1.0 - opacity;
+                    if weight < 1e-4 {
                         continue;
                     }
                     let colour = |c: usize| values[c * cells + cell];
@@ -86,13 +136,51 @@ impl LayoutPoints {
                         colour(2),
                         colour(3),
                     ]);
-                    weights.push(opacity);
+                    weights.push(weight);
                 }
             }
         }
         let total: f64 = weights.iter().sum();
         weights.iter_mut().for_each(|w| *w /= total);
         Ok(Self { points, weights })
+    }
+
+    /// Several volumes' matter pooled into one set, each volume weighing `1 / sets.len()`:
+    /// where matter stands over a set of scenes. Against one scene's matter this measures the
+    /// arrangement a generator keeps on average, not each scene's own variation (a ring turned
+    /// is far from the ring, but rings turned every way pool to the ring's annulus); empty sets
+    /// are left out, and pooling none gives an empty set.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use scene_metrics::{layout_distance, LayoutPoints};
+    /// // One grey voxel at either end of a 4-voxel row, and both halves pooled.
+    /// let at = |x: usize| {
+    ///     let mut v = vec![0f32; 4 * 4];
+    ///     v[x] = 50.0;
+    ///     for c in 1..4 { v[c * 4 + x] = 0.5; }
+    ///     LayoutPoints::from_volume(&Tensor::from_vec(v, (4, 1, 1, 4), &Device::Cpu)?, 0.5)
+    /// };
+    /// let pooled = LayoutPoints::pooled(&[at(0)?, at(3)?]);
+    /// assert_eq!(pooled.len(), 2);
+    /// // Half the matter moves by 1.5 along x: half as far as moving all of it.
+    /// let (half, all) = (layout_distance(&at(0)?, &pooled, 64, 0)?, layout_distance(&at(0)?, &at(3)?, 64, 0)?);
+    /// assert!((half - all / 2.0).abs() < 1e-9, "{half} {all}");
+    /// # Ok::<(), scene_metrics::Error>(())
+    /// ```
+    #[must_use]
+    pub fn pooled(sets: &[LayoutPoints]) -> Self {
+        let kept: Vec<&LayoutPoints> = sets.iter().filter(|set| !set.is_empty()).collect();
+        let share = 1.0 / kept.len().max(1) as f64;
+        let mut pooled = Self {
+            points: Vec::new(),
+            weights: Vec::new(),
+        };
+        for set in kept {
+            pooled.points.extend_from_slice(&set.points);
+            pooled.weights.extend(set.weights.iter().map(|w| w * share));
+        }
+        pooled
     }
 
     /// The number of points (voxels holding matter).
@@ -224,7 +312,9 @@ mod tests {
     use candle_core::{Device, Tensor};
     use rand::SeedableRng;
 
-    use super::{layout_distance, random_direction, wasserstein_1d, LayoutPoints, DIMS};
+    use super::{
+        layout_distance, random_direction, wasserstein_1d, LayoutPoints, LayoutWeighting, DIMS,
+    };
 
     /// A physical `(4, n, n, n)` volume with grey matter of density 40 in the cells `solid`
     /// says, colour `rgb` there.
@@ -297,6 +387,51 @@ mod tests {
         let near = layout_distance(&scene, &turned, 128, 0).unwrap();
         let far = layout_distance(&scene, &heap, 128, 0).unwrap();
         assert!(far > 3.0 * near, "heap {far}, turned ring {near}");
+    }
+
+    #[test]
+    fn seen_from_above_weighs_opacity_by_the_transmittance_above() {
+        // One column of two voxels of opacity 1/2 each (sigma ln 2 per unit voxel): from above
+        // the top one weighs 1/2, the lower 1/2 x 1/2, normalised 2/3 and 1/3.
+        let sigma = std::f32::consts::LN_2;
+        let v = vec![sigma, sigma, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5];
+        let column = Tensor::from_vec(v, (4, 2, 1, 1), &Device::Cpu).unwrap();
+        let seen = LayoutPoints::from_volume_weighted(&column, 1.0, LayoutWeighting::SeenFromAbove)
+            .unwrap();
+        let mut pairs: Vec<(f32, f64)> = seen
+            .points
+            .iter()
+            .zip(&seen.weights)
+            .map(|(p, &w)| (p[2], w))
+            .collect();
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert_eq!(pairs.len(), 2);
+        assert!(
+            (pairs[0].1 - 1.0 / 3.0).abs() < 1e-6 && pairs[0].0 < 0.0,
+            "{pairs:?}"
+        );
+        assert!(
+            (pairs[1].1 - 2.0 / 3.0).abs() < 1e-6 && pairs[1].0 > 0.0,
+            "{pairs:?}"
+        );
+        let all = LayoutPoints::from_volume(&column, 1.0).unwrap();
+        assert!(all.weights.iter().all(|&w| (w - 0.5).abs() < 1e-6));
+    }
+
+    #[test]
+    fn hidden_matter_does_not_count_seen_from_above() {
+        // The same opaque top layer; below it solid ground in one volume, empty in the other.
+        let n = 6;
+        let top = volume(n, [0.3, 0.6, 0.2], |_, _, z| z == 4);
+        let solid = volume(n, [0.3, 0.6, 0.2], |_, _, z| z <= 4);
+        let weighted =
+            |v: &Tensor, weighting| LayoutPoints::from_volume_weighted(v, 1.0, weighting).unwrap();
+        let seen = LayoutWeighting::SeenFromAbove;
+        let d = layout_distance(&weighted(&top, seen), &weighted(&solid, seen), 64, 0).unwrap();
+        assert!(d < 1e-9, "{d}");
+        let all = LayoutWeighting::Opacity;
+        let d = layout_distance(&weighted(&top, all), &weighted(&solid, all), 64, 0).unwrap();
+        assert!(d > 0.1, "{d}");
     }
 
     #[test]

@@ -43,7 +43,7 @@ pub use estimate::Estimate;
 pub use floaters::{floaters, floaters_per_scene};
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
-pub use layout::{layout_distance, LayoutPoints, LAYOUT_DIRECTIONS};
+pub use layout::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
 pub use patch_swd::{
     patch_swd_mv, patch_swd_per_scene, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED,
 };

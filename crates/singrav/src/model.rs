@@ -292,6 +292,33 @@ impl SinGrav {
             .collect()
     }
 
+    /// Noise for 3D scales `1..=scales` that varies only from scale `vary_from` on: the
+    /// coarser scales take the reconstruction noise ([`SinGrav::reconstruction_noise`]), so
+    /// they keep V*'s layout, and the finer ones fresh noise from `rng` (SinGAN's generation
+    /// from a given scale: only finer structure varies). Every scale's noise is drawn from
+    /// `rng` either way, so a seed gives the same finer noise whatever `vary_from`;
+    /// `vary_from` 1 is [`SinGrav::draw_noise`]. Errors unless `vary_from` is one of the
+    /// `scales`.
+    pub fn draw_noise_from(
+        &self,
+        scales: usize,
+        vary_from: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Result<Vec<Tensor>> {
+        if !(1..=scales).contains(&vary_from) {
+            return Err(invalid(
+                "vary_from",
+                format!("expected a 3D scale from 1 to {scales}, got {vary_from}"),
+            ));
+        }
+        let mut noise = self.draw_noise(scales, rng)?;
+        if vary_from > 1 {
+            let kept = self.reconstruction_noise(vary_from - 1)?;
+            noise.splice(..vary_from - 1, kept);
+        }
+        Ok(noise)
+    }
+
     /// The optimised reconstruction noise z*_n of 3D scale `n` >= 2, when the configuration
     /// optimises it and the scale is built.
     pub fn reconstruction_noise_var(&self, n: usize) -> Option<&Var> {

@@ -88,7 +88,29 @@ impl SinGrav {
     /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
-        self.sample_with(|| self.generate_random(rng), cameras)
+        self.sample_varying_from(rng, cameras, 1)
+    }
+
+    /// [`SinGrav::sample`] with the scales below `vary_from` kept at the reconstruction's
+    /// noise ([`SinGrav::draw_noise_from`]): V*'s layout with new finer structure. With the
+    /// same `rng`, scene i differs from [`SinGrav::sample`]'s scene i only below `vary_from`.
+    ///
+    /// ```no_run
+    /// use rand::SeedableRng;
+    /// # let device = candle_core::Device::Cpu;
+    /// let (model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    /// let same_layout = model.sample_varying_from(&mut rng, &cameras, 2)?;
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn sample_varying_from(
+        &self,
+        rng: &mut impl rand::Rng,
+        cameras: &[Camera],
+        vary_from: usize,
+    ) -> Result<Sample> {
+        self.sample_with(|| self.generate_random_from(rng, vary_from), cameras)
     }
 
     /// The fixed-noise reconstruction V* ([`SinGrav::reconstruct`]) as a [`Sample`]: the scene
@@ -127,7 +149,17 @@ impl SinGrav {
     /// A random raw volume `(1, 4, s, s, s)` of the finest 3D scale built, from noise drawn
     /// from `rng` (detached; what [`SinGrav::sample`] activates and renders).
     pub fn generate_random(&self, rng: &mut impl rand::Rng) -> Result<Tensor> {
-        let noise = self.draw_noise(self.volume_scales(), rng)?;
+        self.generate_random_from(rng, 1)
+    }
+
+    /// [`SinGrav::generate_random`] with the scales below `vary_from` at the reconstruction's
+    /// noise ([`SinGrav::draw_noise_from`]).
+    pub fn generate_random_from(
+        &self,
+        rng: &mut impl rand::Rng,
+        vary_from: usize,
+    ) -> Result<Tensor> {
+        let noise = self.draw_noise_from(self.volume_scales(), vary_from, rng)?;
         Ok(self.generate(&noise)?.detach())
     }
 

@@ -637,6 +637,34 @@ fn animation_walks_smoothly_and_harmonisation_runs_the_finer_scales() {
         assert!(model.animate(2, bad, &mut rng).is_err());
     }
 
+    // Varying from scale 3: scales 1 and 2 take V*'s noise, scale 3 the seed's own draw.
+    let seeded = || rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let draw = |vary_from| model.draw_noise_from(3, vary_from, &mut seeded()).unwrap();
+    let (all, kept) = (draw(1), draw(3));
+    let v_star_noise = model.reconstruction_noise(3).unwrap();
+    assert_eq!(dist(&kept[0], &v_star_noise[0]), 0.0);
+    assert_eq!(dist(&kept[1], &v_star_noise[1]), 0.0);
+    assert_eq!(dist(&kept[2], &all[2]), 0.0);
+    assert!(dist(&all[0], &v_star_noise[0]) > 0.0);
+    let plain = model.draw_noise(3, &mut seeded()).unwrap();
+    assert!(all.iter().zip(&plain).all(|(a, b)| dist(a, b) == 0.0));
+    for bad in [0, 4] {
+        assert!(model.draw_noise_from(3, bad, &mut seeded()).is_err());
+    }
+    // The animation from scale 3 starts from that noise and moves only scale 3.
+    let from_three = singrav::applications::WalkConfig {
+        vary_from: 3,
+        ..walk
+    };
+    let kept_frames = model.animate(2, from_three, &mut seeded()).unwrap();
+    assert_eq!(dist(&kept_frames[0], &model.generate(&kept).unwrap()), 0.0);
+    assert!(dist(&kept_frames[0], &kept_frames[1]) > 0.0);
+    let bad = singrav::applications::WalkConfig {
+        vary_from: 4,
+        ..walk
+    };
+    assert!(model.animate(2, bad, &mut seeded()).is_err());
+
     // Harmonising from scale 2 re-runs G_2 and G_3, from scale 3 only G_3 (on the edit itself).
     let edited = frames[0].clone();
     for from in [2, 3] {
@@ -992,6 +1020,24 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
     assert!(steps
         .iter()
         .any(|(_, l)| l.get(LossTerm::VolumeCritic).is_some()));
+    // Up to scale 1 only (the CPU presets' choice): judged there, not at scale 2.
+    let coarsest_only = config.clone().with(|c| {
+        c.critics.volume_until_scale = Some(1);
+    });
+    let (_, steps) = run_with(
+        &coarsest_only,
+        &data,
+        &tmp.path().join("coarsest"),
+        &options,
+    );
+    for (scale, losses) in &steps {
+        let judged = *scale == 1 && losses.get(LossTerm::Critic).is_some();
+        assert_eq!(
+            losses.get(LossTerm::VolumeCritic).is_some(),
+            judged,
+            "scale {scale}"
+        );
+    }
 
     let without = tmp.path().join("without");
     run_to_end(&micro(), &data, &without);

@@ -17,6 +17,11 @@ pub struct WalkConfig {
     /// the model's finest 3D scale. The paper starts at scale 3 for its scenes; the default, 2,
     /// also moves scale 2 so that models with few scales still move.
     pub first_moving_scale: usize,
+    /// Scales below this take the reconstruction's noise in every frame
+    /// ([`SinGrav::draw_noise_from`]): V*'s layout, animated above it (1, the default: the
+    /// first frame is a random sample). The walk moves the scales from the larger of this and
+    /// `first_moving_scale` on.
+    pub vary_from: usize,
 }
 
 impl Default for WalkConfig {
@@ -25,6 +30,7 @@ impl Default for WalkConfig {
             anchor: 0.58,
             momentum: 0.45,
             first_moving_scale: 2,
+            vary_from: 1,
         }
     }
 }
@@ -38,6 +44,7 @@ impl WalkConfig {
     /// assert!(WalkConfig::default().validate(5).is_ok());
     /// assert!(WalkConfig { anchor: 1.5, ..WalkConfig::default() }.validate(5).is_err());
     /// assert!(WalkConfig { first_moving_scale: 6, ..WalkConfig::default() }.validate(5).is_err());
+    /// assert!(WalkConfig { vary_from: 0, ..WalkConfig::default() }.validate(5).is_err());
     /// ```
     pub fn validate(&self, scales: usize) -> Result<()> {
         for (what, value) in [("anchor", self.anchor), ("momentum", self.momentum)] {
@@ -48,14 +55,16 @@ impl WalkConfig {
                 ));
             }
         }
-        if !(1..=scales).contains(&self.first_moving_scale) {
-            return Err(invalid(
-                "first_moving_scale",
-                format!(
-                    "expected one of the model's 3D scales 1 to {scales}, got {}",
-                    self.first_moving_scale
-                ),
-            ));
+        for (what, scale) in [
+            ("first_moving_scale", self.first_moving_scale),
+            ("vary_from", self.vary_from),
+        ] {
+            if !(1..=scales).contains(&scale) {
+                return Err(invalid(
+                    what,
+                    format!("expected one of the model's 3D scales 1 to {scales}, got {scale}"),
+                ));
+            }
         }
         Ok(())
     }
@@ -81,14 +90,15 @@ impl SinGrav {
     /// smoothed random walk `z(t+1) = a z(1) + (1 - a) (z(t) + d(t+1))`,
     /// `d(t+1) = x (z(t) - z(t-1)) + (1 - x) mu(t+1)`, with fresh noise `mu` of each scale's
     /// amplitude drawn from `rng`; coarser scales keep `z(1)`. The first frame is a sample as
-    /// [`SinGrav::generate`] makes it from `z(1)`.
+    /// [`SinGrav::generate`] makes it from `z(1)`, which is the reconstruction's noise below
+    /// `walk.vary_from`.
     pub fn animation<R: rand::Rng>(
         &self,
         walk: WalkConfig,
         mut rng: R,
     ) -> Result<Animation<'_, R>> {
         walk.validate(self.volume_scales())?;
-        let first = self.draw_noise(self.volume_scales(), &mut rng)?;
+        let first = self.draw_noise_from(self.volume_scales(), walk.vary_from, &mut rng)?;
         Ok(Animation {
             model: self,
             walk,
@@ -127,7 +137,8 @@ impl<R: rand::Rng> Animation<'_, R> {
         let mu = self.model.draw_noise(scales, &mut self.rng)?;
         let (a, x) = (self.walk.anchor, self.walk.momentum);
         let mut next = self.current.clone();
-        for i in self.walk.first_moving_scale - 1..scales {
+        let first_moving = self.walk.first_moving_scale.max(self.walk.vary_from);
+        for i in first_moving - 1..scales {
             let step = ((&self.current[i] - &self.previous[i])? * x + (&mu[i] * (1.0 - x))?)?;
             next[i] = ((&self.first[i] * a)? + ((&self.current[i] + step)? * (1.0 - a))?)?;
         }

@@ -187,6 +187,11 @@ pub struct Critics {
     /// (inside matter, under the ground), and a critic that asks for it puts that noise into
     /// the samples.
     pub volume_colour: bool,
+    /// The finest 3D scale the 3D critic judges (`None`: every 3D scale). The coarsest scales
+    /// make the scene's layout, where a critic of whole volumes sees what renderings' patches
+    /// cannot; the finer ones only refine it.
+    #[serde(default)]
+    pub volume_until_scale: Option<usize>,
 }
 
 /// How raw volumes are activated and rendered.

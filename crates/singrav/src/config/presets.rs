@@ -193,6 +193,7 @@ fn paper() -> TrainConfig {
             gradient_penalty: 0.1,
             opacity: true,
             volume_colour: false,
+            volume_until_scale: None,
         },
         rendering: Rendering {
             density_scale: 25.0,

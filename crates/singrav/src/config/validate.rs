@@ -177,6 +177,15 @@ impl TrainConfig {
                 ));
             }
         }
+        let volume_scales = self.scales() - 1;
+        if let Some(last) = self.critics.volume_until_scale {
+            if !(1..=volume_scales).contains(&last) {
+                return Err(invalid(
+                    "critics.volume_until_scale",
+                    format!("expected one of the 3D scales 1 to {volume_scales}, got {last}"),
+                ));
+            }
+        }
         if !self.ablations.use_swd && losses.swd_features != SwdFeatures::PatchPyramid {
             return Err(invalid(
                 "losses.swd_features",
@@ -313,6 +322,8 @@ mod tests {
             ("schedule.learning_rate", "0"),
             ("noise.first_amplitude", "-1"),
             ("run.holdout", "1"),
+            ("critics.volume_until_scale", "0"),
+            ("critics.volume_until_scale", "3"),
         ] {
             let err = micro
                 .clone()

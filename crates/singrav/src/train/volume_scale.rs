@@ -173,7 +173,11 @@ impl<'a> VolumeScale<'a> {
                 FittedTarget::new(volume, size, density, self.model.device())
             })
             .transpose()?;
-        if self.config.losses.volume_critic > 0.0 {
+        let judged = match self.config.critics.volume_until_scale {
+            Some(last) => self.n <= last,
+            None => true,
+        };
+        if self.config.losses.volume_critic > 0.0 && judged {
             if self.fitted.is_none() {
                 return Err(crate::error::invalid(
                     "losses.volume_critic",

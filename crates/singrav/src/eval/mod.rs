@@ -12,14 +12,17 @@
 //!   given InceptionV3's first block, SIFID-MV;
 //! - the generated volumes' arrangement: their [`layout_distance`] from the scene's volume,
 //!   which is a direct fit of the training views ([`LayoutReference::Fit`]) or V*
-//!   ([`LayoutReference::Reconstruction`]).
+//!   ([`LayoutReference::Reconstruction`]);
+//! - for a dataset of a built-in scene, with [`EvalConfig::family`], the same sample metrics
+//!   of the scene's other layouts seen from the same views ([`Family`]): what a perfect
+//!   generator of that kind of scene scores.
 //!
 //! ```no_run
 //! use singrav::eval::{evaluate, EvalConfig};
 //! let (model, _) = singrav::SinGrav::load("out/demo/run".as_ref(), &candle_core::Device::Cpu)?;
 //! let data = rgbd_dataset::Dataset::load("out/demo/dataset".as_ref(), model.config().rendering.background)?;
 //! let numbers = evaluate(&model, &data, &EvalConfig::default(), None, &mut |_, _| {})?;
-//! println!("V*: {:.2} dB, Diversity-MV {:.3}", numbers.reconstruction_psnr, numbers.diversity_mv);
+//! println!("V*: {:.2} dB, Diversity-MV {:?}", numbers.reconstruction_psnr, numbers.samples.diversity_mv);
 //! # Ok::<(), singrav::Error>(())
 //! ```
 
@@ -28,14 +31,20 @@ use radiance_volume::RadianceVolume;
 use rand::SeedableRng;
 use rgbd_dataset::Dataset;
 use scene_metrics::{
-    colour_swd_per_scene, depth_rmse, diversity_mv, floaters_per_scene, layout_distance, mean_psnr,
-    mean_ssim, patch_swd_per_scene, sifid_mv, Estimate, InceptionBlock1, LayoutPoints,
-    LAYOUT_DIRECTIONS, PATCH_SWD_MIN_SIDE,
+    depth_rmse, layout_distance, mean_psnr, mean_ssim, InceptionBlock1, LayoutPoints,
+    LayoutWeighting, LAYOUT_DIRECTIONS,
 };
 use serde::Serialize;
 
 use crate::error::{invalid, Result};
 use crate::SinGrav;
+
+mod family;
+mod scores;
+
+pub use family::Family;
+pub use scores::SceneScores;
+use scores::SeenScenes;
 
 /// The scene's volume the generated volumes' arrangement is measured against.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -77,16 +86,26 @@ pub struct EvalConfig {
     pub seed: u64,
     /// The scene's volume the layout distance is measured against.
     pub layout_reference: LayoutReference,
+    /// The coarsest 3D scale whose noise varies ([`SinGrav::draw_noise_from`]; 1: every
+    /// scale's).
+    pub vary_from: usize,
+    /// Other layouts of the dataset's built-in scene to score as a reference row
+    /// ([`Family`]); 0: none. Needs a dataset that records its scene
+    /// ([`Dataset::scene_source`]).
+    pub family: usize,
 }
 
 impl Default for EvalConfig {
-    /// `volgen eval`'s defaults: 32 scenes from 4 views, seed 0, layouts against a fit.
+    /// `volgen eval`'s defaults: 32 scenes from 4 views, seed 0, layouts against a fit, every
+    /// scale varying, no family.
     fn default() -> Self {
         Self {
             scenes: 32,
             views: 4,
             seed: 0,
             layout_reference: LayoutReference::Fit,
+            vary_from: 1,
+            family: 0,
         }
     }
 }
@@ -132,36 +151,18 @@ pub struct Evaluation {
     pub volume_views: usize,
     /// The same over every held-out view (None without a holdout).
     pub held_out_volume_psnr: Option<f64>,
-    /// Lower is closer to the real views' patch statistics; None for views too small for its
-    /// pyramid.
-    pub patch_swd_mv: Option<f64>,
-    /// One standard error of `patch_swd_mv` over the generated scenes (as for every `_stderr`
-    /// below: the value's spread over repeated draws of as many scenes).
-    pub patch_swd_mv_stderr: Option<f64>,
-    /// Lower is closer to the real views' colours.
-    pub colour_swd: f64,
-    /// Its standard error over scenes.
-    pub colour_swd_stderr: f64,
-    /// Mean opacity where the real views are empty; None when no real pixel is empty.
-    pub floaters: Option<f64>,
-    /// Its standard error over scenes.
-    pub floaters_stderr: Option<f64>,
-    /// Higher is more varied; 0 when every scene is the same.
-    pub diversity_mv: f64,
-    /// The jackknife standard error over scenes; None with fewer than 3 scenes.
-    pub diversity_mv_stderr: Option<f64>,
-    /// Lower is closer to the real views' statistics; None without InceptionV3 weights.
-    pub sifid_mv: Option<f64>,
-    /// The generated volumes' mean [`layout_distance`] from `layout_reference`'s volume: lower
-    /// keeps the scene's arrangement (where its matter is, of which colour) closer.
-    pub layout_distance: f64,
-    /// Its standard error over scenes.
-    pub layout_distance_stderr: f64,
+    /// The coarsest 3D scale whose noise varied.
+    pub vary_from: usize,
+    /// The generated scenes' sample metrics.
+    #[serde(flatten)]
+    pub samples: SceneScores,
     /// V*'s layout distance from the fit (None when V* is the reference).
     pub reconstruction_layout_distance: Option<f64>,
     /// What the layout distances are measured against: `fit` (a direct fit of the training
     /// views) or `vstar`.
     pub layout_reference: String,
+    /// The reference row of the built-in scene's other layouts, when asked for.
+    pub family: Option<Family>,
 }
 
 /// How closely V* reproduces a set of real views.
@@ -191,6 +192,26 @@ pub fn evaluate(
     if config.views < 1 {
         return Err(invalid("views", "must be at least 1"));
     }
+    let scales = model.volume_scales();
+    if !(1..=scales).contains(&config.vary_from) {
+        return Err(invalid(
+            "vary_from",
+            format!(
+                "expected one of the model's 3D scales 1 to {scales}, got {}",
+                config.vary_from
+            ),
+        ));
+    }
+    let source =
+        match (config.family, dataset.scene_source()) {
+            (0, _) => None,
+            (_, Some(source)) => Some(source),
+            (_, None) => return Err(invalid(
+                "family",
+                "the dataset records no built-in scene (`volgen_scene` in its transforms.json, \
+                 which `volgen scene` and `volgen demo` write), so it has no family of layouts",
+            )),
+        };
     let device = model.device();
     // The model renders in its own cube: a run trained with --bounds sees the views there.
     // Kept apart from the scene's copy only when the two differ.
@@ -233,40 +254,47 @@ pub fn evaluate(
         .transpose()?;
 
     let all: Vec<usize> = (0..dataset.len()).collect();
-    let chosen = dataset.subset(&spread(&all, config.views))?;
+    let chosen_frames = spread(&all, config.views);
+    let chosen = dataset.subset(&chosen_frames)?;
     let size = model.render_size();
     let coarse = chosen.level(size, size, device)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
-    let mut views: Vec<Tensor> = Vec::with_capacity(config.scenes);
-    let mut opacity: Vec<Tensor> = Vec::with_capacity(config.scenes);
-    let mut layouts: Vec<f64> = Vec::with_capacity(config.scenes);
+    let mut seen = SeenScenes::with_capacity(config.scenes);
     for i in 0..config.scenes {
-        // As `SinGrav::sample` draws them: scene i here is scene i of `volgen sample`.
-        let raw = model.generate_random(&mut rng)?;
-        layouts.push(layout_from(&reference, &model.to_physical(&raw)?)?);
+        // As `SinGrav::sample_varying_from` draws them: scene i here is scene i of
+        // `volgen sample --vary-from`.
+        let raw = model.generate_random_from(&mut rng, config.vary_from)?;
+        seen.layouts
+            .push(layout_from(&reference, &model.to_physical(&raw)?)?);
         let maps = model.render_maps(&raw, &coarse.cameras)?;
-        views.push(maps.rgb);
-        opacity.push(maps.opacity);
+        seen.views.push(maps.rgb);
+        seen.opacity.push(maps.opacity);
         progress(i + 1, config.scenes);
     }
     // The upsampler, when trained, doubles the renderings: compare at the size they came out.
-    let image_size = views[0].dim(3)?;
+    let image_size = seen.views[0].dim(3)?;
     let real = chosen.level(image_size, image_size, device)?.images;
-    let patch_swd = (image_size >= PATCH_SWD_MIN_SIDE)
-        .then(|| Estimate::mean_of(&patch_swd_per_scene(&views, &real)?))
+    let samples = SceneScores::of(&seen, &real, &coarse.opacity, inception)?;
+    let family = source
+        .map(|source| {
+            let views = family::FamilyViews {
+                frames: scene_dataset.subset(&chosen_frames)?,
+                image_size,
+                opacity_size: size,
+                grid: model.config().pyramid.volume_sizes[scales - 1],
+                background: model.config().rendering.background,
+            };
+            Family::score(
+                source,
+                config.family,
+                &views,
+                &reference,
+                &real,
+                &coarse.opacity,
+                inception,
+            )
+        })
         .transpose()?;
-    let colour = Estimate::mean_of(&colour_swd_per_scene(&views, &real)?)?;
-    let layout = Estimate::mean_of(&layouts)?;
-    let floaters = floaters_per_scene(&opacity, &coarse.opacity)?
-        .map(|per_scene| Estimate::mean_of(&per_scene))
-        .transpose()?;
-    // The jackknife computes Diversity-MV over all scenes too; below 3 scenes it has no error.
-    let (diversity, diversity_stderr) = if config.scenes >= 3 {
-        let estimate = Estimate::jackknife(&views, |scenes| diversity_mv(scenes, &real))?;
-        (estimate.value, Some(estimate.stderr))
-    } else {
-        (diversity_mv(&views, &real)?, None)
-    };
 
     Ok(Evaluation {
         scenes: config.scenes,
@@ -286,24 +314,14 @@ pub fn evaluate(
         volume_psnr: training_volume_psnr,
         volume_views: training.len(),
         held_out_volume_psnr,
-        patch_swd_mv: patch_swd.map(|e| e.value),
-        patch_swd_mv_stderr: patch_swd.map(|e| e.stderr),
-        colour_swd: colour.value,
-        colour_swd_stderr: colour.stderr,
-        floaters: floaters.map(|e| e.value),
-        floaters_stderr: floaters.map(|e| e.stderr),
-        diversity_mv: diversity,
-        diversity_mv_stderr: diversity_stderr,
-        sifid_mv: inception
-            .map(|block| sifid_mv(&views, &real, block))
-            .transpose()?,
-        layout_distance: layout.value,
-        layout_distance_stderr: layout.stderr,
+        vary_from: config.vary_from,
+        samples,
         reconstruction_layout_distance: reconstruction_layout,
         layout_reference: match config.layout_reference {
             LayoutReference::Fit => "fit".into(),
             LayoutReference::Reconstruction => "vstar".into(),
         },
+        family,
     })
 }
 
@@ -324,15 +342,22 @@ fn layout_reference(
     layout_points(&volume)
 }
 
-/// A physical volume's matter as layout points.
+/// A physical volume's matter as layout points, as seen from above
+/// ([`LayoutWeighting::SeenFromAbove`]): a fit of views holds fog where no view sees (below
+/// the ground), and a generated volume holds what it likes there; weighted by opacity alone,
+/// that hidden matter outweighed the arrangement on top (docs/metrics.md, "layout_distance").
 fn layout_points(volume: &RadianceVolume) -> Result<LayoutPoints> {
     let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
-    Ok(LayoutPoints::from_volume(volume.tensor(), voxel)?)
+    Ok(LayoutPoints::from_volume_weighted(
+        volume.tensor(),
+        voxel,
+        LayoutWeighting::SeenFromAbove,
+    )?)
 }
 
 /// The layout distance of `volume` from the reference's matter (infinite for a volume with no
 /// matter: [`layout_distance`]).
-fn layout_from(reference: &LayoutPoints, volume: &RadianceVolume) -> Result<f64> {
+pub(super) fn layout_from(reference: &LayoutPoints, volume: &RadianceVolume) -> Result<f64> {
     let points = layout_points(volume)?;
     Ok(layout_distance(
         reference,
