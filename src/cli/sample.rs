@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context, Result};
 use rand::SeedableRng;
 use singrav::sample::{showcase_cameras, Sample};
 use singrav::SinGrav;
@@ -58,7 +58,10 @@ pub fn run(args: &SampleArgs) -> Result<()> {
         "--turntable: expected at least 1 frame, got 0"
     );
     let model = load_model(&args.model)?;
-    check_vary_from(&model, args.vary_from)?;
+    // Before anything is written.
+    model
+        .check_vary_from(args.vary_from)
+        .context("--vary-from")?;
     let views = Views::new(&model, args.views, args.turntable)?;
     if args.reconstruction {
         let mut v_star = model.reconstruction_sample(&views.cameras)?;
@@ -87,16 +90,6 @@ pub fn run(args: &SampleArgs) -> Result<()> {
         &args.out,
         args.outputs,
     )?;
-    Ok(())
-}
-
-/// Refuses a `--vary-from` that is not one of the model's 3D scales, before anything is written.
-pub fn check_vary_from(model: &SinGrav, vary_from: usize) -> Result<()> {
-    let scales = model.volume_scales();
-    ensure!(
-        (1..=scales).contains(&vary_from),
-        "--vary-from: expected one of the model's 3D scales 1 to {scales}, got {vary_from}"
-    );
     Ok(())
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
-use crate::scenes::{Scene, SceneKind};
+use crate::scenes::SceneKind;
 
 /// The built-in scene a dataset was rendered from, as `transforms.json` records it:
 ///
@@ -40,12 +40,6 @@ impl SceneSource {
     pub fn family_seeds(&self, count: usize) -> impl Iterator<Item = u64> {
         let seed = self.seed;
         (1..=count as u64).map(move |i| seed.wrapping_add(i))
-    }
-
-    /// The scene laid out from another seed.
-    #[must_use]
-    pub fn layout(&self, seed: u64) -> Box<dyn Scene> {
-        self.kind.build(seed)
     }
 
     /// The record written into `transforms.json`.

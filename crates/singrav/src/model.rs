@@ -305,18 +305,19 @@ impl SinGrav {
         vary_from: usize,
         rng: &mut impl rand::Rng,
     ) -> Result<Vec<Tensor>> {
-        if !(1..=scales).contains(&vary_from) {
-            return Err(invalid(
-                "vary_from",
-                format!("expected a 3D scale from 1 to {scales}, got {vary_from}"),
-            ));
-        }
+        check_vary_from(vary_from, scales)?;
         let mut noise = self.draw_noise(scales, rng)?;
         if vary_from > 1 {
             let kept = self.reconstruction_noise(vary_from - 1)?;
             noise.splice(..vary_from - 1, kept);
         }
         Ok(noise)
+    }
+
+    /// Errors unless `vary_from` is one of the 3D scales built, as [`SinGrav::draw_noise_from`]
+    /// needs it (so callers can refuse it before any work).
+    pub fn check_vary_from(&self, vary_from: usize) -> Result<()> {
+        check_vary_from(vary_from, self.volume_scales())
     }
 
     /// The optimised reconstruction noise z*_n of 3D scale `n` >= 2, when the configuration
@@ -520,6 +521,18 @@ impl SinGrav {
         }
         Ok(model)
     }
+}
+
+/// Errors unless `vary_from` is one of `scales` 3D scales (1-based), naming the setting: what
+/// [`SinGrav::draw_noise_from`], the evaluation and the animation accept.
+pub(crate) fn check_vary_from(vary_from: usize, scales: usize) -> Result<()> {
+    if (1..=scales).contains(&vary_from) {
+        return Ok(());
+    }
+    Err(invalid(
+        "vary_from",
+        format!("expected one of the model's 3D scales 1 to {scales}, got {vary_from}"),
+    ))
 }
 
 /// Sets every trainable variable of `map` from `tensors[prefix + name]`.

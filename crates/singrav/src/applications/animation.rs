@@ -55,18 +55,16 @@ impl WalkConfig {
                 ));
             }
         }
-        for (what, scale) in [
-            ("first_moving_scale", self.first_moving_scale),
-            ("vary_from", self.vary_from),
-        ] {
-            if !(1..=scales).contains(&scale) {
-                return Err(invalid(
-                    what,
-                    format!("expected one of the model's 3D scales 1 to {scales}, got {scale}"),
-                ));
-            }
+        if !(1..=scales).contains(&self.first_moving_scale) {
+            return Err(invalid(
+                "first_moving_scale",
+                format!(
+                    "expected one of the model's 3D scales 1 to {scales}, got {}",
+                    self.first_moving_scale
+                ),
+            ));
         }
-        Ok(())
+        crate::model::check_vary_from(self.vary_from, scales)
     }
 }
 

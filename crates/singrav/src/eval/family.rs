@@ -56,7 +56,7 @@ impl Family {
         let seeds: Vec<u64> = source.family_seeds(count).collect();
         let mut seen = SeenScenes::with_capacity(count);
         for &seed in &seeds {
-            let scene = source.layout(seed);
+            let scene = source.kind.build(seed);
             let full = scene.to_volume(GridDims::cube(source.grid))?;
             let rendered = views.frames.rendered(&full, views.background)?;
             let size = views.image_size;

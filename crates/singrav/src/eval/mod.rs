@@ -192,16 +192,8 @@ pub fn evaluate(
     if config.views < 1 {
         return Err(invalid("views", "must be at least 1"));
     }
+    model.check_vary_from(config.vary_from)?;
     let scales = model.volume_scales();
-    if !(1..=scales).contains(&config.vary_from) {
-        return Err(invalid(
-            "vary_from",
-            format!(
-                "expected one of the model's 3D scales 1 to {scales}, got {}",
-                config.vary_from
-            ),
-        ));
-    }
     let source =
         match (config.family, dataset.scene_source()) {
             (0, _) => None,

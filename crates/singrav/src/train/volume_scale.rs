@@ -173,10 +173,11 @@ impl<'a> VolumeScale<'a> {
                 FittedTarget::new(volume, size, density, self.model.device())
             })
             .transpose()?;
-        let judged = match self.config.critics.volume_until_scale {
-            Some(last) => self.n <= last,
-            None => true,
-        };
+        let judged = self
+            .config
+            .critics
+            .volume_until_scale
+            .is_none_or(|last| self.n <= last);
         if self.config.losses.volume_critic > 0.0 && judged {
             if self.fitted.is_none() {
                 return Err(crate::error::invalid(
