@@ -14,6 +14,7 @@
 //! | [`dataset`] | `rgbd-dataset` | RGB-D datasets (load, write, resize, bounds) and built-in scenes |
 //! | [`metrics`] | `scene-metrics` | Diversity-MV, SIFID-MV, PSNR, SSIM, patch and colour SWD, floaters |
 //! | [`fit`] | `volume-fit` | a direct fit of one radiance volume to a dataset |
+//! | [`mesh`] | `volume-mesh` | coloured triangle meshes of volumes (glTF, GLB, PLY, OBJ) |
 //! | [`singrav`] | `singrav` | the SinGRAV model |
 //!
 //! ```
@@ -32,6 +33,7 @@ pub use singrav;
 pub use swd_loss as swd;
 pub use volrender as render;
 pub use volume_fit as fit;
+pub use volume_mesh as mesh;
 
 /// The types most users need.
 pub mod prelude {

@@ -93,6 +93,74 @@ fn info_export_and_render_write_what_they_say() {
 }
 
 #[test]
+fn mesh_writes_each_format_and_refuses_bad_input_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = small_volume(dir.path());
+    for extension in ["glb", "gltf", "ply", "obj"] {
+        let file = dir.path().join("meshes").join(format!("ball.{extension}"));
+        let text = common::ok(&volgen(&["mesh", &vol, "--out", common::path(&file)]));
+        assert!(
+            text.contains("closed") && text.contains(common::path(&file)),
+            "{text}"
+        );
+        let bytes = std::fs::read(&file).unwrap();
+        let magic: &[u8] = match extension {
+            "glb" => b"glTF",
+            "gltf" => b"{",
+            "ply" => b"ply\n",
+            _ => b"# written by volgen",
+        };
+        assert!(bytes.starts_with(magic), "{extension}");
+    }
+    // The glTF as an independent reader sees it: a ball of radius 0.5 (y up in the file).
+    let (document, buffers, _) = gltf::import(dir.path().join("meshes/ball.glb")).unwrap();
+    let primitive = document
+        .meshes()
+        .next()
+        .unwrap()
+        .primitives()
+        .next()
+        .unwrap();
+    let positions: Vec<[f32; 3]> = primitive
+        .reader(|b| Some(&buffers[b.index()]))
+        .read_positions()
+        .unwrap()
+        .collect();
+    assert!(positions.len() > 100);
+    for p in &positions {
+        let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        assert!((r - 0.5).abs() < 0.15, "{p:?}");
+    }
+    let out = dir.path().join("ball.stl");
+    let err = common::failure(&volgen(&["mesh", &vol, "--out", common::path(&out)]));
+    assert!(err.contains("ball.stl") && err.contains(".glb"), "{err}");
+    let glb = dir.path().join("x.glb");
+    let err = common::failure(&volgen(&[
+        "mesh",
+        &vol,
+        "--out",
+        common::path(&glb),
+        "--level",
+        "1",
+    ]));
+    assert!(err.contains("--level"), "{err}");
+    let empty = RadianceVolume::from_fn(GridDims::cube(4), Aabb::CUBE, 4, |_, _| {}).unwrap();
+    let empty_path = dir.path().join("empty.safetensors");
+    empty.save_safetensors(&empty_path).unwrap();
+    let err = common::failure(&volgen(&[
+        "mesh",
+        common::path(&empty_path),
+        "--out",
+        common::path(&glb),
+    ]));
+    assert!(
+        err.contains("no surface") && err.contains("empty.safetensors"),
+        "{err}"
+    );
+    assert!(!glb.exists());
+}
+
+#[test]
 fn bad_input_is_a_clear_error_not_a_panic() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("missing.safetensors");

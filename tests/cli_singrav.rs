@@ -688,6 +688,11 @@ fn sample_reconstruction_writes_v_star_like_any_sample() {
         "0",
         "--reconstruction",
         "--vdb",
+        "--mesh",
+        "ply",
+        // micro's V* is thin fog: its densest voxel stops about a sixth of the light.
+        "--mesh-level",
+        "0.1",
         "--turntable",
         "5",
         "--out",
@@ -699,6 +704,7 @@ fn sample_reconstruction_writes_v_star_like_any_sample() {
         "reconstruction.png",
         "reconstruction.vdb",
         "reconstruction.gif",
+        "reconstruction.ply",
     ] {
         assert!(alone.join(file).is_file(), "{file} missing: {text}");
     }

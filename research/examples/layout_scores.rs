@@ -13,7 +13,7 @@
 use candle_core::Device;
 use radiance_volume::GridDims;
 use rand::SeedableRng;
-use research::stone_shares;
+use research::{mean_and_sd, stone_shares};
 use rgbd_dataset::scenes::{Scene, StandingStones};
 use rgbd_dataset::Dataset;
 use scene_metrics::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
@@ -54,13 +54,6 @@ const WEIGHTINGS: [LayoutWeighting; 2] = [LayoutWeighting::Opacity, LayoutWeight
 fn points(volume: &radiance_volume::RadianceVolume, weighting: LayoutWeighting) -> LayoutPoints {
     let voxel = 2.0 / volume.dims().xyz()[0] as f32;
     LayoutPoints::from_volume_weighted(volume.tensor(), voxel, weighting).unwrap()
-}
-
-/// Mean and standard deviation.
-fn stats(values: &[f64]) -> (f64, f64) {
-    let mean = values.iter().sum::<f64>() / values.len() as f64;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64;
-    (mean, var.sqrt())
 }
 
 fn main() {
@@ -135,7 +128,7 @@ fn main() {
     let row = |name: &str, scores: &[(Vec<f64>, (f64, f64))]| {
         let cells: Vec<String> = (0..references.len())
             .map(|c| {
-                let (m, sd) = stats(&scores.iter().map(|s| s.0[c]).collect::<Vec<_>>());
+                let (m, sd) = mean_and_sd(&scores.iter().map(|s| s.0[c]).collect::<Vec<_>>());
                 format!("{m:.4} ± {sd:.4}")
             })
             .collect();
@@ -144,7 +137,7 @@ fn main() {
             "| {name} | {} | {} | {:.1}% |",
             scores.len(),
             cells.join(" | "),
-            100.0 * stats(&inside).0
+            100.0 * mean_and_sd(&inside).0
         );
     };
     println!("| volumes | count | to the scene, opacity | to the scene, seen from above | to the fit, opacity | to the fit, seen from above | to the fit, seen from above, position only | stone matter inside the ring |");

@@ -37,3 +37,10 @@ pub fn stone_shares(volume: &radiance_volume::RadianceVolume) -> (f64, f64) {
     }
     (inside / total.max(1e-12), ring / total.max(1e-12))
 }
+
+/// The mean and the (population) standard deviation of `values`.
+pub fn mean_and_sd(values: &[f64]) -> (f64, f64) {
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64;
+    (mean, var.sqrt())
+}

@@ -143,6 +143,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         vdb: cfg!(feature = "vdb"),
         exr_slices: cfg!(feature = "exr"),
         upsample: None,
+        mesh: None,
+        mesh_level: volume_mesh::DEFAULT_LEVEL,
     };
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let draws = Draws {

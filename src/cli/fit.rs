@@ -34,6 +34,13 @@ pub struct FitArgs {
     /// Also write the volume as a stack of EXR slices into this directory.
     #[arg(long, value_name = "DIR")]
     exr_slices: Option<PathBuf>,
+    /// Also write the volume's surface as a coloured mesh to this file (.glb, .gltf, .ply,
+    /// .obj), at opacity level `--mesh-level`.
+    #[arg(long, value_name = "FILE")]
+    mesh: Option<PathBuf>,
+    /// The mesh's surface level: opacity across one voxel, in (0, 1).
+    #[arg(long, value_name = "L", default_value_t = volume_mesh::DEFAULT_LEVEL, value_parser = super::mesh::surface_level)]
+    mesh_level: f32,
     /// Optimisation steps (default 1000 when --seconds is not given).
     #[arg(long, value_name = "K", conflicts_with = "seconds")]
     steps: Option<usize>,
@@ -123,6 +130,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
         "--out {}: expected a file name ending in .safetensors",
         args.out.display()
     );
+    if let Some(file) = &args.mesh {
+        super::mesh::check_mesh_file(file).context("--mesh")?;
+    }
     let mut config = fit_config(args)?;
     let training_config = TrainConfig::preset("tiny")?;
     let dataset = load_dataset(&args.dataset, &training_config, args.depth_kind)?;
@@ -315,6 +325,9 @@ fn write_outputs(
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "volume".into());
         write_exr_slices(&volume, dir, &stem, &Encoding::default())?;
+    }
+    if let Some(file) = &args.mesh {
+        super::mesh::write_mesh(&volume, file, args.mesh_level)?;
     }
     println!(
         "wrote {} (views: {}, report: {})",

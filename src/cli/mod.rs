@@ -11,6 +11,7 @@ mod eval;
 mod export;
 mod fit;
 mod info;
+mod mesh;
 mod model_io;
 mod render;
 mod sample;
@@ -31,6 +32,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Export a volume to OpenVDB (Blender, Houdini) and/or a stack of EXR slices.
     Export(export::ExportArgs),
+    /// Write a volume's surface as a coloured triangle mesh (.glb, .gltf, .ply, .obj).
+    Mesh(mesh::MeshArgs),
     /// Render a volume from the cameras of a transforms.json to EXR (R, G, B, A, Z) and PNG.
     Render(render::RenderArgs),
     /// Reconstruct a dataset's scene directly as one radiance volume (no networks): VDB/EXR, PSNR.
@@ -63,6 +66,7 @@ pub fn run() -> ExitCode {
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
         Command::Export(args) => export::run(&args),
+        Command::Mesh(args) => mesh::run(&args),
         Command::Render(args) => render::run(&args),
         Command::Fit(args) => fit::run(&args),
         Command::Scene(args) => scene::run(&args),

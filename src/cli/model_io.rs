@@ -1,6 +1,6 @@
 //! Shared by the commands that generate scenes from a trained model (`sample`, `animate`,
 //! `edit`): loading the model, and writing one scene's files (physical volume, views, and
-//! VDB / EXR slices on request).
+//! VDB / EXR slices and meshes on request).
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +20,13 @@ pub struct Outputs {
     /// Also write each volume as a stack of EXR slices.
     #[arg(long)]
     pub exr_slices: bool,
+    /// Also write each volume's surface as a coloured mesh in this format (`{stem}.glb`, ...;
+    /// docs/formats.md, "Meshes").
+    #[arg(long, value_name = "FORMAT")]
+    pub mesh: Option<super::mesh::MeshExtension>,
+    /// The meshes' surface level: opacity across one voxel, in (0, 1).
+    #[arg(long, value_name = "L", default_value_t = volume_mesh::DEFAULT_LEVEL, value_parser = super::mesh::surface_level)]
+    pub mesh_level: f32,
     /// Write the volumes (safetensors, VDB, EXR) on a grid K times finer per axis, K odd.
     /// Tools that interpolate physical density (Blender, OpenVDB) render a run trained with
     /// post-activated density (`tiny`'s default) as volgen does only on a finer grid: at 1 its
@@ -106,6 +113,11 @@ pub fn write_scene(
             stem,
             &Encoding::default(),
         )?;
+    }
+    if let Some(format) = outputs.mesh {
+        let file = dir.join(format!("{stem}.{}", format.extension()));
+        super::mesh::write_mesh(volume, &file, outputs.mesh_level)
+            .with_context(|| format!("writing the mesh {}", file.display()))?;
     }
     Ok(dir.join(format!("{stem}.*")))
 }

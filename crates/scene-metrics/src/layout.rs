@@ -24,7 +24,7 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::error::{invalid, Result};
 
 /// Coordinates of a layout point: position (3) and colour (3).
-const DIMS: usize = 6;
+pub(crate) const DIMS: usize = 6;
 
 /// How [`LayoutPoints::from_volume_weighted`] weights a voxel's point.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -40,9 +40,9 @@ pub enum LayoutWeighting {
 /// A volume's matter as weighted points, ready for [`layout_distance`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct LayoutPoints {
-    points: Vec<[f32; DIMS]>,
+    pub(crate) points: Vec<[f32; DIMS]>,
     /// Each point's share of the volume's matter (they sum to 1).
-    weights: Vec<f64>,
+    pub(crate) weights: Vec<f64>,
 }
 
 impl LayoutPoints {
@@ -183,6 +183,20 @@ impl LayoutPoints {
         pooled
     }
 
+    /// `set`'s points with other weights (one per point, renormalised to sum to 1); points
+    /// of weight 0 are left out.
+    pub(crate) fn reweighted(set: &LayoutPoints, weights: Vec<f64>) -> Self {
+        let total: f64 = weights.iter().sum();
+        let (points, weights) = set
+            .points
+            .iter()
+            .zip(weights)
+            .filter(|(_, w)| *w > 0.0)
+            .map(|(p, w)| (*p, w / total))
+            .unzip();
+        Self { points, weights }
+    }
+
     /// The number of points (voxels holding matter).
     pub fn len(&self) -> usize {
         self.points.len()
@@ -245,6 +259,27 @@ pub fn layout_distance(
     directions: usize,
     seed: u64,
 ) -> Result<f64> {
+    sliced_w1(a, b, directions, seed, Slice::All)
+}
+
+/// Which coordinates of the points a sliced distance projects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Slice {
+    /// Position and colour.
+    All,
+    /// Position alone.
+    Position,
+}
+
+/// The sliced Wasserstein-1 distance between two weighted point sets over the coordinates
+/// `slice` names: [`layout_distance`]'s definition.
+pub(crate) fn sliced_w1(
+    a: &LayoutPoints,
+    b: &LayoutPoints,
+    directions: usize,
+    seed: u64,
+    slice: Slice,
+) -> Result<f64> {
     if directions == 0 {
         return Err(invalid("directions", "need at least one"));
     }
@@ -253,20 +288,24 @@ pub fn layout_distance(
         (true, false) | (false, true) => return Ok(f64::INFINITY),
         (false, false) => {}
     }
+    let used = match slice {
+        Slice::All => DIMS,
+        Slice::Position => 3,
+    };
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut total = 0.0;
     for _ in 0..directions {
-        let direction = random_direction(&mut rng);
+        let direction = random_direction(&mut rng, used);
         total += wasserstein_1d(&a.projected(&direction), &b.projected(&direction));
     }
     Ok(total / directions as f64)
 }
 
-/// A uniformly random unit vector of `DIMS` coordinates.
-fn random_direction(rng: &mut impl rand::Rng) -> [f64; DIMS] {
+/// A uniformly random unit vector in the first `used` of `DIMS` coordinates (the rest 0).
+fn random_direction(rng: &mut impl rand::Rng, used: usize) -> [f64; DIMS] {
     loop {
         let mut d = [0.0; DIMS];
-        for x in &mut d {
+        for x in &mut d[..used] {
             *x = StandardNormal.sample(rng);
         }
         let norm = d.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -354,7 +393,7 @@ mod tests {
         let (directions, seed) = (64, 7);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let expected = (0..directions)
-            .map(|_| 0.25 * random_direction(&mut rng)[0].abs())
+            .map(|_| 0.25 * random_direction(&mut rng, DIMS)[0].abs())
             .sum::<f64>()
             / directions as f64;
         let got = layout_distance(&a, &b, directions, seed).unwrap();
@@ -484,7 +523,7 @@ mod tests {
     fn directions_are_unit_vectors() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1);
         for _ in 0..10 {
-            let d = super::random_direction(&mut rng);
+            let d = super::random_direction(&mut rng, DIMS);
             assert_eq!(d.len(), DIMS);
             assert!((d.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12);
         }

@@ -1020,9 +1020,10 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
     assert!(steps
         .iter()
         .any(|(_, l)| l.get(LossTerm::VolumeCritic).is_some()));
-    // Up to scale 1 only (the CPU presets' choice): judged there, not at scale 2.
+    // Up to scale 1 only, seeing what a ray from above meets: judged there, not at scale 2.
     let coarsest_only = config.clone().with(|c| {
         c.critics.volume_until_scale = Some(1);
+        c.critics.volume_seen_from_above = true;
     });
     let (_, steps) = run_with(
         &coarsest_only,
@@ -1037,6 +1038,9 @@ fn a_volume_critic_trains_against_the_fitted_volume_and_resumes() {
             judged,
             "scale {scale}"
         );
+        assert!(losses
+            .get(LossTerm::VolumeAdversarial)
+            .is_none_or(f32::is_finite));
     }
 
     let without = tmp.path().join("without");

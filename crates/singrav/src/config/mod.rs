@@ -192,6 +192,12 @@ pub struct Critics {
     /// cannot; the finer ones only refine it.
     #[serde(default)]
     pub volume_until_scale: Option<usize>,
+    /// The 3D critic sees each voxel weighted by the transmittance of the voxels above it (the
+    /// matter a ray straight down from the top of the box meets: the ground's surface and what
+    /// stands on it), not all matter. A fit of views leaves fog wherever no view sees (under the
+    /// ground, inside objects); a critic that sees it asks the samples for that fog.
+    #[serde(default)]
+    pub volume_seen_from_above: bool,
 }
 
 /// How raw volumes are activated and rendered.

@@ -194,6 +194,7 @@ fn paper() -> TrainConfig {
             opacity: true,
             volume_colour: false,
             volume_until_scale: None,
+            volume_seen_from_above: false,
         },
         rendering: Rendering {
             density_scale: 25.0,

@@ -74,6 +74,59 @@ fn raw_density_target(
     Ok(resample_tensor(&raw, GridDims::cube(size))?.unsqueeze(0)?)
 }
 
+/// What the 3D critic sees of a volume ([`crate::config::Critics`]): per-voxel opacity, with
+/// `colour` opacity-weighted colour after it, and with `seen_from_above` every channel weighted
+/// by the transmittance of the voxels above (the matter a ray straight down meets).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct VolumeSight {
+    pub colour: bool,
+    pub seen_from_above: bool,
+}
+
+impl VolumeSight {
+    pub fn of(critics: &crate::config::Critics) -> Self {
+        Self {
+            colour: critics.volume_colour,
+            seen_from_above: critics.volume_seen_from_above,
+        }
+    }
+}
+
+/// The transmittance `(B, 1, s, s, s)` from the top of the box (the last z index, the box's z
+/// axis being up) down to just above each voxel, of a per-voxel opacity `(B, 1, s, s, s)`: the
+/// product of `1 - opacity` over the voxels above. Differentiable; the product is taken as the
+/// exponential of a sum of logarithms, each `1 - opacity` floored at `1e-6` so that an opaque
+/// voxel's logarithm stays finite.
+fn transmittance_above(opacity: &Tensor) -> Result<Tensor> {
+    let log_clear = (opacity.neg()? + 1.0)?.clamp(1e-6, 1.0)?.log()?;
+    // z last, then a product with the matrix of ones where z' > z sums each column above z.
+    let z_last = log_clear.transpose(2, 4)?.contiguous()?;
+    let n = z_last.dim(4)?;
+    let (dtype, device) = (z_last.dtype(), z_last.device());
+    let strictly_above = (Tensor::tril2(n, dtype, device)? - Tensor::eye(n, dtype, device)?)?;
+    let above = z_last.broadcast_matmul(&strictly_above)?;
+    Ok(above.exp()?.transpose(2, 4)?.contiguous()?)
+}
+
+/// `opacity` and its weighted colour `weighted_rgb` as `sight` sees them.
+fn sighted(opacity: &Tensor, weighted_rgb: Option<&Tensor>, sight: VolumeSight) -> Result<Tensor> {
+    let seen = if sight.seen_from_above {
+        Some(transmittance_above(opacity)?)
+    } else {
+        None
+    };
+    let weigh = |t: &Tensor| -> Result<Tensor> {
+        match &seen {
+            Some(t_above) => Ok(t.broadcast_mul(t_above)?),
+            None => Ok(t.clone()),
+        }
+    };
+    match weighted_rgb {
+        Some(rgb) if sight.colour => Ok(Tensor::cat(&[&weigh(opacity)?, &weigh(rgb)?], 1)?),
+        _ => weigh(opacity),
+    }
+}
+
 /// Per-voxel opacity of a physical density `(.., 1, s, s, s)` across a voxel of edge `voxel`.
 fn voxel_opacity(sigma: &Tensor, voxel: f64) -> Result<Tensor> {
     Ok(((sigma * -voxel)?.exp()?.neg()? + 1.0)?)
@@ -114,14 +167,10 @@ impl FittedTarget {
     }
 
     /// The fitted volume as the 3D critic sees volumes: `(1, 1, s, s, s)` opacity per voxel,
-    /// and with `colour` `(1, 4, s, s, s)`, opacity-weighted colour after it (see
-    /// [`FittedTarget::volume_features`]).
-    pub fn features(&self, colour: bool) -> Result<Tensor> {
-        if colour {
-            Ok(Tensor::cat(&[&self.opacity, &self.weighted_rgb], 1)?)
-        } else {
-            Ok(self.opacity.clone())
-        }
+    /// and with `sight.colour` `(1, 4, s, s, s)`, opacity-weighted colour after it, weighted
+    /// as `sight` says (see [`FittedTarget::volume_features`]).
+    pub fn features(&self, sight: VolumeSight) -> Result<Tensor> {
+        sighted(&self.opacity, Some(&self.weighted_rgb), sight)
     }
 
     /// The same features of raw generated volumes `(B, 4, s, s, s)`, colour weighted by each
@@ -131,15 +180,16 @@ impl FittedTarget {
         &self,
         raw: &Tensor,
         activation: &Activation,
-        colour: bool,
+        sight: VolumeSight,
     ) -> Result<Tensor> {
         let physical = activation.apply(raw)?;
         let opacity = voxel_opacity(&physical.narrow(1, 0, 1)?, self.voxel)?;
-        if !colour {
-            return Ok(opacity);
-        }
-        let rgb = physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?;
-        Ok(Tensor::cat(&[&opacity, &rgb], 1)?)
+        let rgb = if sight.colour {
+            Some(physical.narrow(1, 1, 3)?.broadcast_mul(&opacity)?)
+        } else {
+            None
+        };
+        sighted(&opacity, rgb.as_ref(), sight)
     }
 
     /// The mean squared difference of opacity (post-activated runs: of raw density over
@@ -274,6 +324,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn transmittance_above_is_the_product_of_the_clear_shares_above() -> Result<()> {
+        // Two columns of 3 voxels, z = 0 at the bottom: opacities (bottom to top) 0.5, 0.2, 0.4
+        // and 0, 1, 0.5.
+        let opacity = Tensor::from_vec(
+            vec![0.5f32, 0.0, 0.2, 1.0, 0.4, 0.5],
+            (1, 1, 3, 1, 2),
+            &Device::Cpu,
+        )?;
+        let got: Vec<f32> = transmittance_above(&opacity)?.flatten_all()?.to_vec1()?;
+        // Top: 1; middle: 1 - top; bottom: (1 - top)(1 - middle) (an opaque voxel: 1e-6).
+        let want = [0.6 * 0.8, 0.5 * 1e-6, 0.6, 0.5, 1.0, 1.0];
+        for (g, w) in got.iter().zip(want) {
+            assert!((f64::from(*g) - w).abs() < 1e-6, "{got:?} against {want:?}");
+        }
+        Ok(())
+    }
+
+    #[test]
     fn loss_is_zero_for_the_fitted_volume_itself_and_grows_with_a_difference() -> Result<()> {
         let activation = Activation::default()
             .with_density_scale(25.0)
@@ -284,9 +352,18 @@ mod tests {
         let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
         assert!(same < 1e-10, "{same}");
         // What the 3D critic sees of the fitted volume and of the same raw volume generated.
-        for (colour, channels) in [(false, 1), (true, 4)] {
-            let real = target.features(colour)?;
-            let generated = target.volume_features(&raw, &activation, colour)?;
+        for (colour, seen_from_above, channels) in [
+            (false, false, 1),
+            (true, false, 4),
+            (false, true, 1),
+            (true, true, 4),
+        ] {
+            let sight = VolumeSight {
+                colour,
+                seen_from_above,
+            };
+            let real = target.features(sight)?;
+            let generated = target.volume_features(&raw, &activation, sight)?;
             assert_eq!(real.dims(), &[1, channels, 6, 6, 6]);
             let diff = (real - generated)?.abs()?.max_all()?.to_scalar::<f32>()?;
             assert!(diff < 1e-6, "{diff}");

@@ -12,7 +12,7 @@ use rgbd_dataset::DatasetLevel;
 
 use super::colour::{chroma_distribution_loss, colour_distribution_loss};
 use super::critic::{Critic, VolumeCritic};
-use super::fitted::FittedTarget;
+use super::fitted::{FittedTarget, VolumeSight};
 use super::height_profile::height_profile_loss;
 use super::losses::{LossTerm, StepLosses, StepMeans, StepTerms};
 use super::sample_opacity::opacity_binary_loss;
@@ -248,9 +248,9 @@ impl<'a> VolumeScale<'a> {
     ) -> Result<()> {
         let fake_volume = self.fake_volume(draw)?.detach();
         if let (Some(critic), Some(fitted)) = (&mut self.volume_critic, &self.fitted) {
-            let colour = self.config.critics.volume_colour;
-            let real = fitted.features(colour)?;
-            let fake = fitted.volume_features(&fake_volume, &self.config.activation(), colour)?;
+            let sight = VolumeSight::of(&self.config.critics);
+            let real = fitted.features(sight)?;
+            let fake = fitted.volume_features(&fake_volume, &self.config.activation(), sight)?;
             // One real volume and this iteration's one fake at every step.
             let (critic, penalty) =
                 critic.steps_on(self.config, rng, |_| Ok((real.clone(), fake.clone())))?;
@@ -286,7 +286,7 @@ impl<'a> VolumeScale<'a> {
             let features = fitted.volume_features(
                 &fake_volume,
                 &self.config.activation(),
-                self.config.critics.volume_colour,
+                VolumeSight::of(&self.config.critics),
             )?;
             let loss = (critic.generator_loss(&features)? * losses.volume_critic)?;
             terms.add(LossTerm::VolumeAdversarial, loss);
