@@ -38,24 +38,12 @@ pub fn check_mesh_file(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The mesh formats `--mesh` takes, by their file extension.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MeshExtension {
-    Glb,
-    Gltf,
-    Ply,
-    Obj,
-}
-
-impl MeshExtension {
-    pub fn extension(self) -> &'static str {
-        match self {
-            Self::Glb => "glb",
-            Self::Gltf => "gltf",
-            Self::Ply => "ply",
-            Self::Obj => "obj",
-        }
-    }
+/// Parses `--mesh`'s format by its extension (glb, gltf, ply, obj).
+pub fn mesh_format(text: &str) -> std::result::Result<MeshFormat, String> {
+    MeshFormat::from_extension(text).ok_or_else(|| {
+        let known: Vec<&str> = MeshFormat::ALL.iter().map(|f| f.extension()).collect();
+        format!("expected one of {}, got {text:?}", known.join(", "))
+    })
 }
 
 /// Loads the volume, extracts its surface and writes the mesh, saying what it wrote.

@@ -20,10 +20,10 @@ pub struct Outputs {
     /// Also write each volume as a stack of EXR slices.
     #[arg(long)]
     pub exr_slices: bool,
-    /// Also write each volume's surface as a coloured mesh in this format (`{stem}.glb`, ...;
+    /// Also write each volume's surface as a coloured mesh: glb, gltf, ply or obj (`{stem}.glb`, ...;
     /// docs/formats.md, "Meshes").
-    #[arg(long, value_name = "FORMAT")]
-    pub mesh: Option<super::mesh::MeshExtension>,
+    #[arg(long, value_name = "FORMAT", value_parser = super::mesh::mesh_format)]
+    pub mesh: Option<volume_mesh::MeshFormat>,
     /// The meshes' surface level: opacity across one voxel, in (0, 1).
     #[arg(long, value_name = "L", default_value_t = volume_mesh::DEFAULT_LEVEL, value_parser = super::mesh::surface_level)]
     pub mesh_level: f32,

@@ -36,21 +36,38 @@ pub enum MeshFormat {
 }
 
 impl MeshFormat {
-    /// The format `path`'s extension names (case-insensitive).
-    pub fn from_path(path: &Path) -> Result<Self> {
-        let extension = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match extension.as_deref() {
-            Some("glb") => Ok(Self::Glb),
-            Some("gltf") => Ok(Self::Gltf),
-            Some("ply") => Ok(Self::Ply),
-            Some("obj") => Ok(Self::Obj),
-            _ => Err(Error::UnknownFormat {
-                path: path.to_path_buf(),
-            }),
+    /// Every format, in the order the docs list them.
+    pub const ALL: [MeshFormat; 4] = [Self::Glb, Self::Gltf, Self::Ply, Self::Obj];
+
+    /// The file extension of the format (`glb`, `gltf`, `ply`, `obj`).
+    ///
+    /// ```
+    /// assert_eq!(volume_mesh::MeshFormat::Ply.extension(), "ply");
+    /// ```
+    pub fn extension(self) -> &'static str {
+        match self {
+            Self::Glb => "glb",
+            Self::Gltf => "gltf",
+            Self::Ply => "ply",
+            Self::Obj => "obj",
         }
+    }
+
+    /// The format an extension names (case-insensitive, without the dot).
+    pub fn from_extension(extension: &str) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|format| format.extension().eq_ignore_ascii_case(extension))
+    }
+
+    /// The format `path`'s extension names.
+    pub fn from_path(path: &Path) -> Result<Self> {
+        path.extension()
+            .and_then(|e| e.to_str())
+            .and_then(Self::from_extension)
+            .ok_or_else(|| Error::UnknownFormat {
+                path: path.to_path_buf(),
+            })
     }
 }
 
