@@ -60,9 +60,10 @@ const TINY_CHROMA: f64 = 100.0;
 /// ([`TINY_VOLUME_CRITIC_UNTIL`]) and seeing each voxel as a ray from above meets it
 /// ([`Critics::volume_seen_from_above`]). The coarsest scale makes the layout, and 2D critics of
 /// 24^2 renderings let it go: without it a fifth to a quarter of the stones' matter stood inside
-/// their ring. Over three seeds of the stones, the islands and the mushrooms, the samples' layout
-/// distance came to 1.08-1.47x that of other true layouts of each scene, with patch SWD-MV,
-/// colour SWD and floaters at or below those without it (docs/journal/2026-12-arrangement.md).
+/// their ring, about 1% with it. Over three seeds of the stones, the islands and the mushrooms,
+/// the samples' layout distance came to 0.89-1.47x that of other true layouts of each scene
+/// (means 1.21x, 1.31x, 1.00x), with patch SWD-MV, colour SWD and floaters at or below those
+/// without it (docs/journal/2026-12-arrangement.md).
 const TINY_VOLUME_CRITIC: f64 = 0.3;
 
 /// The last scale `tiny`'s 3D critic judges: the coarsest, where the layout is made.
@@ -112,8 +113,8 @@ impl TrainConfig {
     ///   5x the paper's, the samples' height profile, optimised reconstruction noise z*_n, the
     ///   binary-opacity prior with the chroma-distribution loss on its samples, and
     ///   post-activated density, and a 3D critic of the coarsest volumes as seen from above
-    ///   (which needs a fit of the dataset's views, made first); 11 to 14 minutes of training
-    ///   on 2 CPU cores.
+    ///   (which needs a fit of the dataset's views, made first); 10 to 14 minutes of training
+    ///   on 2 CPU cores (an Intel Xeon with AVX-512, 2026-12-02).
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds); dense finer scale.
     ///
     /// Every preset but `micro` runs its finer 3D scales on the active set, shell included
