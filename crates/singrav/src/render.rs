@@ -1,6 +1,6 @@
 //! Rendering raw generated volumes into image tensors for the critics and the losses.
 
-use candle_core::{Device, Tensor};
+use candle_core::Tensor;
 use radiance_volume::Activation;
 use volrender::{render, Camera, DensityInterpolation, Rays, RenderConfig, Sampler};
 
@@ -66,7 +66,7 @@ impl ViewRenderer {
         })
     }
 
-    /// One pass of the render op with `config`'s outputs, reshaped to `(V, C, h, w)` maps on
+    /// One pass of the renderer with `config`'s outputs, reshaped to `(V, C, h, w)` maps on
     /// the volume's device.
     fn render_with(
         &self,
@@ -92,25 +92,22 @@ impl ViewRenderer {
             dirs.extend_from_slice(rays.dirs());
         }
         let rays = Rays::new(origins, dirs)?;
-        let device = raw.device().clone();
-        // The render op runs on the CPU; on another device the volume moves there and back.
-        // A post-activating renderer takes raw density and activates it per sample.
+        // On the CPU the fused kernel renders; on another device volrender's portable path (candle
+        // ops), so the volume stays where it is. A post-activating renderer takes raw density
+        // and activates it per sample.
         let raw = raw.squeeze(0)?;
         let physical = match config.density {
             DensityInterpolation::Physical => self.activation.apply(&raw)?,
             DensityInterpolation::PostActivated { .. } => self.activation.apply_colour(&raw)?,
-        }
-        .to_device(&Device::Cpu)?;
+        };
         let out = render(&physical, &rays, &config)?;
         let views = cameras.len();
         let rgb = out
             .rgb
             .reshape((views, h, w, 3))?
             .permute((0, 3, 1, 2))?
-            .contiguous()?
-            .to_device(&device)?;
-        let plane =
-            |t: Tensor| -> Result<Tensor> { Ok(t.reshape((views, 1, h, w))?.to_device(&device)?) };
+            .contiguous()?;
+        let plane = |t: Tensor| -> Result<Tensor> { Ok(t.reshape((views, 1, h, w))?) };
         let depth = match out.depth {
             Some(d) => Some((plane(d)? / f64::from(self.depth_norm))?),
             None => None,

@@ -10,7 +10,8 @@
 //!   differentiable with respect to the volume (closed-form O(N) backward), deterministic, parallel
 //!   over rays; [`RenderConfig`] picks the [`Sampler`], early termination, empty-space skipping,
 //!   background and outputs.
-//! - [`reference::render_reference`]: the same model from plain candle ops, to cross-check.
+//! - [`portable::render_portable`]: the same model from plain candle ops, on any candle device
+//!   (CUDA, Metal): `render` uses it for volumes that are not on the CPU.
 //! - [`render_image`] and [`Image`] with PNG and EXR writers, for the CLI.
 //! - [`scenes`]: the peer benchmark's dense and sparse scenes and camera.
 //!
@@ -62,8 +63,8 @@ mod error;
 mod image;
 mod kernel;
 mod op;
+pub mod portable;
 mod rays;
-pub mod reference;
 pub mod scenes;
 mod threads;
 mod transforms;

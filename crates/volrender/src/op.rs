@@ -143,12 +143,20 @@ pub fn render_batch(
         ));
     }
     if !volumes.device().is_cpu() {
-        return Err(Error::Unsupported {
-            what: "device",
-            why:
-                "the render kernel runs on the CPU; move the volume with `to_device(&Device::Cpu)`"
-                    .into(),
-        });
+        // The kernel reads host memory: elsewhere the same model runs as candle ops.
+        return rays
+            .iter()
+            .enumerate()
+            .map(|(b, r)| {
+                crate::portable::render_volume(
+                    &volumes.get(b)?,
+                    b,
+                    r,
+                    cfg,
+                    crate::portable::DEFAULT_CHUNK_SAMPLES,
+                )
+            })
+            .collect();
     }
     let dims = GridDims::new(d, h, w);
     let packed = match volumes.dtype() {
@@ -452,26 +460,48 @@ fn interleave<T: Pooled>(
                 let (i, c) = (0..voxels)
                     .find_map(|i| refused(&voxel(i)).map(|c| (i, c)))
                     .unwrap_or((0, 0));
-                let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
-                return Err(Error::InvalidVolume {
+                return Err(invalid_volume(
                     count,
-                    first: format!(
-                        "volume {b}, channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {:?}",
-                        radiance_volume::BASE_CHANNELS[c],
-                        voxel(i)[c]
-                    ),
-                    why: if raw_density {
-                        "raw density (channel 0, post-activated) and colours must be finite \
-                         and at most 1e10 in magnitude"
-                    } else {
-                        "density (channel 0) must be finite and >= 0, colours finite and at \
-                         most 1e10 in magnitude"
-                    },
-                });
+                    b,
+                    c,
+                    i,
+                    dims,
+                    voxel(i)[c],
+                    raw_density,
+                ));
             }
             Ok(data)
         })
         .collect()
+}
+
+/// The error for a volume holding `count` values the renderer refuses, the first in channel `c`
+/// of voxel `i` (flat, x fastest) of volume `b` (shared with the portable path, which checks
+/// the same rules with tensor ops).
+pub(crate) fn invalid_volume(
+    count: usize,
+    b: usize,
+    c: usize,
+    i: usize,
+    dims: GridDims,
+    value: impl std::fmt::Debug,
+    raw_density: bool,
+) -> Error {
+    let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
+    Error::InvalidVolume {
+        count,
+        first: format!(
+            "volume {b}, channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {value:?}",
+            radiance_volume::BASE_CHANNELS[c],
+        ),
+        why: if raw_density {
+            "raw density (channel 0, post-activated) and colours must be finite \
+             and at most 1e10 in magnitude"
+        } else {
+            "density (channel 0) must be finite and >= 0, colours finite and at \
+             most 1e10 in magnitude"
+        },
+    }
 }
 
 impl<T: Pooled + WithDType> CustomOp1 for CompositeOp<T> {

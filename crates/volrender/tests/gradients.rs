@@ -1,5 +1,5 @@
 //! The backward against central finite differences in float64, per voxel, and against the
-//! plain-tensor reference's autograd.
+//! portable (candle-ops) path's autograd.
 //!
 //! Tolerance: |analytic - fd| <= 1e-6 (1 + |fd|) with step h = 1e-6 (the f64 central difference
 //! of these smooth losses is accurate to about 1e-9).
@@ -8,7 +8,7 @@ mod common;
 
 use candle_core::{DType, Device, Tensor, Var};
 use proptest::prelude::*;
-use volrender::reference::render_reference;
+use volrender::portable::render_portable;
 use volrender::{
     render, render_batch, DensityInterpolation, Rays, RenderConfig, RenderOutput, Sampler,
 };
@@ -126,10 +126,10 @@ proptest! {
         check_fd(&vols, |v| values(&total(v))[0], &analytic);
     }
 
-    /// The fast kernel and the candle-ops reference agree on values and gradients (f64), with
+    /// The fast kernel and the portable candle-ops path agree on values and gradients (f64), with
     /// both density rules.
     #[test]
-    fn kernel_matches_reference(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>(), post_activated in any::<bool>()) {
+    fn kernel_matches_portable(seed in any::<u64>(), samples in 1usize..12, left in any::<bool>(), post_activated in any::<bool>()) {
         let mut r = rng(seed);
         let vol = random_volume(&mut r, [3, 4, 2], 5.0, DType::F64);
         let rays = mixed_rays(&mut r, 4);
@@ -139,7 +139,7 @@ proptest! {
         let weights = loss_weights(rays.len(), seed);
         let var = Var::from_tensor(&vol).unwrap();
         let fast = render(var.as_tensor(), &rays, &cfg).unwrap();
-        let slow = render_reference(var.as_tensor(), &rays, &cfg).unwrap();
+        let slow = render_portable(var.as_tensor(), &rays, &cfg).unwrap();
         for (a, b) in [(&fast.rgb, &slow.rgb), (fast.depth.as_ref().unwrap(), slow.depth.as_ref().unwrap()),
                        (fast.opacity.as_ref().unwrap(), slow.opacity.as_ref().unwrap())] {
             for (x, y) in values(a).iter().zip(values(b)) {

@@ -1,7 +1,7 @@
 //! The CPU kernels, generic over `f32` and `f64`: ray setup and sample marching (`march`),
 //! chunks of samples interpolated and attenuated together (`chunk`), and per-ray compositing
-//! forward and backward (`composite`); `trilinear` is the corner-weight form of the
-//! interpolation that the reference path uses. Slices in, values out; no tensors here.
+//! forward and backward (`composite`); `trilinear` (tests only) is the corner-weight form of
+//! the interpolation that the lerps are checked against. Slices in, values out; no tensors here.
 //!
 //! The volume is read from an interleaved copy, one `[sigma, r, g, b]` per voxel: a trilinear
 //! sample then touches 8 runs of 16 (f32) bytes instead of 32 scattered floats.
@@ -15,12 +15,12 @@ mod exp;
 mod log;
 mod march;
 mod tile;
+#[cfg(test)]
 mod trilinear;
 
 pub(crate) use composite::Params;
 pub(crate) use march::{setup_ray, GridSpec, OccView};
 pub(crate) use tile::{Isa, RayKernel, PACKED};
-pub(crate) use trilinear::corners;
 
 use num_traits::Float;
 

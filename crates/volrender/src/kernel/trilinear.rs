@@ -1,6 +1,6 @@
 //! Trilinear corners of a sample in continuous index space as 8 voxel indices and weights: the
-//! form the plain-tensor reference path uses (the kernels interpolate with nested lerps, see
-//! `chunk`, and are tested against this).
+//! form the kernels' nested lerps (see `chunk`) are tested against, and the one the portable
+//! path computes with tensor ops (`portable::geometry`).
 //!
 //! This is radiance-volume's sampling rule (`radiance_volume::sample::sample_into`) in generic
 //! precision: index coordinate `u` puts cell `i`'s centre at `u = i`; inside the box
