@@ -101,25 +101,7 @@ pub fn render_batch(
             ),
         )
     })?;
-    if channels < 4 || d * h * w == 0 {
-        return Err(invalid(
-            "volumes",
-            format!(
-                "expected C >= 4 channels and non-empty grids, got shape {:?}",
-                volumes.shape()
-            ),
-        ));
-    }
-    if u32::try_from(d * h * w).is_err() {
-        return Err(Error::Unsupported {
-            what: "volumes",
-            why: format!(
-                "the kernel indexes voxels with 32 bits; a {d} x {h} x {w} grid has more than {} voxels",
-                u32::MAX
-            )
-            .into(),
-        });
-    }
+    let dims = checked_grid("volumes", volumes, channels, [d, h, w])?;
     if let Sampler::PerVoxel { per_voxel } = cfg.sampler {
         // A ray is at most the box's diagonal long, and steps are at most the smallest voxel
         // edge over per_voxel.
@@ -158,7 +140,6 @@ pub fn render_batch(
             })
             .collect();
     }
-    let dims = GridDims::new(d, h, w);
     let packed = match volumes.dtype() {
         DType::F32 => volumes.apply_op1(CompositeOp::<f32>::new(volumes, dims, rays, cfg)?)?,
         DType::F64 => volumes.apply_op1(CompositeOp::<f64>::new(volumes, dims, rays, cfg)?)?,
@@ -179,8 +160,39 @@ pub fn render_batch(
         .collect()
 }
 
-/// The error for volumes of a dtype the kernel does not run in.
-fn unsupported_dtype(dtype: DType) -> Error {
+/// The grid of `volume` (named `what` in errors) with `channels` channels of `[d, h, w]` voxels,
+/// checked as both renderers need: at least 4 channels, at least one voxel, and voxel indices
+/// that fit 32 bits.
+pub(crate) fn checked_grid(
+    what: &'static str,
+    volume: &Tensor,
+    channels: usize,
+    [d, h, w]: [usize; 3],
+) -> Result<GridDims> {
+    if channels < 4 || d * h * w == 0 {
+        return Err(invalid(
+            what,
+            format!(
+                "expected C >= 4 channels and non-empty grids, got shape {:?}",
+                volume.shape()
+            ),
+        ));
+    }
+    if u32::try_from(d * h * w).is_err() {
+        return Err(Error::Unsupported {
+            what,
+            why: format!(
+                "the renderers index voxels with 32 bits; a {d} x {h} x {w} grid has more than {} voxels",
+                u32::MAX
+            )
+            .into(),
+        });
+    }
+    Ok(GridDims::new(d, h, w))
+}
+
+/// The error for volumes of a dtype the renderers do not run in.
+pub(crate) fn unsupported_dtype(dtype: DType) -> Error {
     Error::Unsupported {
         what: "dtype",
         why: format!("the renderer takes f32 or f64 volumes, got {dtype:?}").into(),

@@ -9,8 +9,8 @@ use crate::config::Sampler;
 use crate::error::Result;
 use crate::kernel::{setup_ray, GridSpec, Real};
 
-/// The per-ray columns uploaded to the device.
-const COLUMNS: usize = 8;
+/// The per-ray columns uploaded to the device: `a`, `b`, `t0`, `dt`, `live`.
+const COLUMNS: usize = 9;
 
 /// The offsets `i + off` of a ray's `samples` samples along its step (`off` is the sampler's:
 /// 0.5 for midpoints), `(1, M)`, as the kernel computes them in `T`.
@@ -54,7 +54,6 @@ impl RayBundle {
         device: &Device,
     ) -> Result<Self> {
         let mut rows = Vec::with_capacity(origins.len() * COLUMNS);
-        let mut live = Vec::with_capacity(origins.len());
         for (&o, &d) in origins.iter().zip(dirs) {
             let g = setup_ray(o, d, grid, sampler);
             // A ray without samples may have an infinite entry: keep its numbers finite.
@@ -63,8 +62,8 @@ impl RayBundle {
             } else {
                 (T::zero(), T::zero())
             };
-            rows.extend([g.a[0], g.a[1], g.a[2], g.b[0], g.b[1], g.b[2], t0, dt]);
-            live.push(if g.n > 0 { T::one() } else { T::zero() });
+            let live = if g.n > 0 { T::one() } else { T::zero() };
+            rows.extend([g.a[0], g.a[1], g.a[2], g.b[0], g.b[1], g.b[2], t0, dt, live]);
         }
         let r = origins.len();
         let table = Tensor::from_vec(rows, (r, COLUMNS), device)?;
@@ -74,7 +73,7 @@ impl RayBundle {
             b: [column(3)?, column(4)?, column(5)?],
             t0: column(6)?,
             dt: column(7)?,
-            live: Tensor::from_vec(live, (r, 1), device)?,
+            live: column(8)?,
         })
     }
 
@@ -89,7 +88,7 @@ impl RayBundle {
         let axes = [0, 1, 2].map(|k| Axis::new(&t, &self.a[k], &self.b[k], n[k]));
         let [x, y, z] = axes;
         let (x, y, z) = (x?, y?, z?);
-        let inside = (x.inside.broadcast_mul(&y.inside)? * &z.inside)?
+        let inside = ((&x.inside * &y.inside)? * &z.inside)?
             .to_dtype(t.dtype())?
             .broadcast_mul(&self.live)?;
         // Corner order (z, y, x) with x fastest, weights as the kernel multiplies them.

@@ -11,10 +11,12 @@
 //! weights are computed on the device with the kernel's operations in the kernel's order.
 //!
 //! Memory: rays are rendered in chunks of about `chunk_samples` ray samples (default
-//! [`DEFAULT_CHUNK_SAMPLES`]), so the forward's temporaries are bounded by the chunk: about
-//! 0.5 KB per ray sample in f32 (the 8 taps' indices, weights and gathered values of 4 channels
-//! dominate), 1 GB at the default. With gradients, candle keeps every chunk's graph until the
-//! backward: about 0.3 KB per ray sample in f32 for the whole render.
+//! [`DEFAULT_CHUNK_SAMPLES`]), so the forward's temporaries are bounded by the chunk. Counted
+//! from the tensors it builds (not measured): about 0.5 KB per ray sample in f32, most of it the
+//! 8 taps' indices and weights and their gathered and weighted values of 4 channels, so about
+//! 1 GB per chunk at the default. With gradients, candle keeps the tensors the backward needs
+//! for every chunk until the backward runs, so a differentiated render holds a comparable amount
+//! per ray sample for all of its samples, not one chunk's.
 //!
 //! Differences from the kernel: no early termination (`epsilon` is ignored, which is exact) and
 //! no skipping (`skip_empty` is ignored: the forward is the same, the backward is the full
@@ -29,9 +31,9 @@ use candle_core::{DType, Tensor, WithDType};
 use radiance_volume::GridDims;
 
 use crate::config::{RenderConfig, Sampler};
-use crate::error::{invalid, Error, Result};
+use crate::error::{invalid, Result};
 use crate::kernel::Real;
-use crate::op::{grid_spec, RenderOutput};
+use crate::op::{checked_grid, grid_spec, unsupported_dtype, RenderOutput};
 use crate::rays::Rays;
 
 /// Ray samples per chunk by default (2^21, about 1 GB of forward temporaries in f32).
@@ -101,33 +103,14 @@ pub(crate) fn render_volume(
             format!("expected (C, D, H, W), got {:?}", volume.shape()),
         )
     })?;
-    if channels < 4 || d * h * w == 0 {
-        return Err(invalid(
-            "volume",
-            format!(
-                "expected C >= 4 channels and a non-empty grid, got shape {:?}",
-                volume.shape()
-            ),
-        ));
-    }
-    let dims = GridDims::new(d, h, w);
-    if u32::try_from(dims.voxel_count()).is_err() {
-        return Err(Error::Unsupported {
-            what: "volume",
-            why: format!("taps index voxels with 32 bits; {d} x {h} x {w} voxels are too many")
-                .into(),
-        });
-    }
+    let dims = checked_grid("volume", volume, channels, [d, h, w])?;
     let raw_density = cfg.density.post_activation().is_some();
     values::check(volume, batch_index, dims, raw_density)?;
     let rays_per_chunk = (chunk_samples / samples).max(1);
     match volume.dtype() {
         DType::F32 => render_chunks::<f32>(volume, rays, cfg, dims, samples, rays_per_chunk),
         DType::F64 => render_chunks::<f64>(volume, rays, cfg, dims, samples, rays_per_chunk),
-        other => Err(Error::Unsupported {
-            what: "dtype",
-            why: format!("the renderer takes f32 or f64 volumes, got {other:?}").into(),
-        }),
+        other => Err(unsupported_dtype(other)),
     }
 }
 
