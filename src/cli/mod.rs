@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod animate;
 mod demo;
+mod device_check;
 mod edit;
 mod eval;
 mod export;
@@ -52,6 +53,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// The paper's metrics of a trained model: Diversity-MV, and SIFID-MV with InceptionV3 weights.
     Eval(eval::EvalArgs),
+    /// Check a device (a CUDA GPU) against the CPU and time training on it: one JSON line per check.
+    DeviceCheck(device_check::DeviceCheckArgs),
 }
 
 /// Parses the command line, runs the subcommand and turns errors into a message and exit code 1.
@@ -76,6 +79,7 @@ pub fn run() -> ExitCode {
         Command::Edit(args) => edit::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::DeviceCheck(args) => device_check::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The GPU check: runs `volgen device-check --device cuda` with the binary tools/gpu/build.sh
+# built (so the GPU machine builds nothing) and prints one JSON line per check, then one line
+# with the GPU's peak memory while the checks ran (nvidia-smi, sampled every 200 ms).
+#
+#   tools/gpu/check.sh                          # the binary in target/cuda/release
+#   VOLGEN=/path/to/volgen tools/gpu/check.sh   # another one (its lib/ beside it)
+#   tools/gpu/check.sh --checks render,conv3d   # extra arguments go to device-check
+#
+# The checks (see docs/training.md, "GPU"): render, conv3d, generator, active-set, critic
+# (each the device's form against the CPU kernels, values and gradients), micro-training
+# (the same seed on both devices), paper-iterations (seconds per iteration at each scale of
+# the `paper` preset), tiny-training (a `tiny` run, stopped with what the budget leaves).
+# The whole check stops itself after --budget-seconds (420 by default) and is killed at 480 s,
+# within the 8 minutes the issue allows. Exit status: 0 when every check passed.
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+
+VOLGEN="${VOLGEN:-target/cuda/release/volgen}"
+[ -x "$VOLGEN" ] || { echo "check.sh: no volgen binary at $VOLGEN (run tools/gpu/build.sh first)" >&2; exit 2; }
+# The CUDA runtime the binary links, copied beside it by build.sh.
+export LD_LIBRARY_PATH="$(dirname "$VOLGEN")/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+# candle loads the driver (libcuda), cuBLAS and cuRAND from the machine.
+
+if command -v nvidia-smi > /dev/null; then
+  nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader \
+    | sed 's/^/{"gpu": "/; s/$/"}/'
+  MEMLOG=$(mktemp)
+  nvidia-smi --query-gpu=memory.used --format=csv,noheader,nounits -lms 200 > "$MEMLOG" &
+  SAMPLER=$!
+else
+  echo '{"gpu": null, "note": "no nvidia-smi on this machine"}'
+  SAMPLER=""
+fi
+
+timeout 480 "$VOLGEN" device-check --device cuda "$@"
+STATUS=$?
+
+if [ -n "$SAMPLER" ]; then
+  kill "$SAMPLER" 2> /dev/null
+  wait "$SAMPLER" 2> /dev/null
+  PEAK=$(sort -n "$MEMLOG" | tail -1)
+  echo "{\"check\": \"gpu-memory\", \"peak_mib\": ${PEAK:-null}}"
+  rm -f "$MEMLOG"
+fi
+[ "$STATUS" -eq 124 ] && echo '{"check": "timeout", "ok": false, "note": "killed after 480 s"}'
+exit "$STATUS"
