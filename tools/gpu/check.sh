@@ -16,11 +16,24 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 
-VOLGEN="${VOLGEN:-target/cuda/release/volgen}"
+if [ -z "${VOLGEN:-}" ]; then
+  VOLGEN=target/cuda/release/volgen
+  # The compressed copy build.sh leaves (what a GPU machine is handed), unpacked once.
+  if [ ! -x "$VOLGEN" ] && [ -f target/cuda/volgen-cuda.tar.gz ]; then
+    mkdir -p target/cuda/dist
+    tar -xzf target/cuda/volgen-cuda.tar.gz -C target/cuda/dist
+    VOLGEN=target/cuda/dist/volgen
+  fi
+fi
 [ -x "$VOLGEN" ] || { echo "check.sh: no volgen binary at $VOLGEN (run tools/gpu/build.sh first)" >&2; exit 2; }
-# The CUDA runtime the binary links, copied beside it by build.sh.
+# The CUDA runtime the binary links, copied beside it by build.sh (cuBLAS, cuRAND and the
+# driver come from the machine; copies put in that lib/ folder are found too).
 export LD_LIBRARY_PATH="$(dirname "$VOLGEN")/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-# candle loads the driver (libcuda), cuBLAS and cuRAND from the machine.
+MISSING=$(ldd "$VOLGEN" | awk '/not found/ {print $1}' | tr '\n' ' ')
+if [ -n "$MISSING" ]; then
+  echo "{\"check\": \"libraries\", \"ok\": false, \"missing\": \"${MISSING% }\", \"note\": \"install CUDA 13 (driver R580+, cuBLAS, cuRAND) or put the libraries in $(dirname "$VOLGEN")/lib\"}"
+  exit 1
+fi
 
 if command -v nvidia-smi > /dev/null; then
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader \
