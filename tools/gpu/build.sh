@@ -7,9 +7,9 @@
 #   CUDA_COMPUTE_CAP=80 tools/gpu/build.sh  # A100
 #
 # Output: target/cuda/release/volgen, which tools/gpu/check.sh runs on the GPU machine. The
-# binary loads the driver (libcuda.so.1), cuBLAS and cuBLASLt (.so.13), cuRAND (.so.10) and NVRTC
-# (.so.13) from the machine it runs on: a CUDA 13 installation there (driver R580 or newer). The
-# CUDA runtime (libcudart.so.13), small, is copied beside it (lib/), where check.sh looks.
+# binary loads the driver (libcuda.so.1), cuBLAS and cuBLASLt (.so.13) and cuRAND (.so.10) from
+# the machine it runs on: a CUDA 13 installation there (driver R580 or newer). The CUDA runtime
+# (libcudart.so.13), small, is copied beside it (lib/), where check.sh looks.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 
@@ -32,6 +32,7 @@ CUDA_HOME="$("$VENV/bin/python" -c 'import nvidia, os; print(os.path.join(nvidia
 [ -x "$CUDA_HOME/bin/nvcc" ] || { echo "build.sh: no nvcc at $CUDA_HOME/bin/nvcc" >&2; exit 1; }
 # The linker wants the unversioned names of the libraries.
 for lib in libcudart.so.13 libcublas.so.13 libcublasLt.so.13 libcurand.so.10 libnvrtc.so.13; do
+  [ -e "$CUDA_HOME/lib/$lib" ] || { echo "build.sh: the wheels gave no $CUDA_HOME/lib/$lib" >&2; exit 1; }
   ln -sf "$lib" "$CUDA_HOME/lib/${lib%.so.*}.so"
 done
 # The driver (libcuda) comes with the GPU's driver, not with a wheel: link against a stub that
@@ -39,10 +40,12 @@ done
 # so the machine's real driver is what the binary loads.
 STUBS="$VENV/stubs"
 mkdir -p "$STUBS"
-CUDARC_SYS=$(cargo metadata --format-version 1 --features cuda 2> /dev/null \
+CUDARC_SYS=$(cargo metadata --format-version 1 --features cuda \
   | "$VENV/bin/python" -c 'import json, os, sys
 pkgs = json.load(sys.stdin)["packages"]
 cudarc = [p for p in pkgs if p["name"] == "cudarc"]
+if not cudarc:
+    sys.exit("build.sh: cargo metadata lists no cudarc (candle-core cuda feature?)")
 print(os.path.join(os.path.dirname(cudarc[0]["manifest_path"]), "src/driver/sys/mod.rs"))')
 grep -oE '^pub unsafe fn cu[A-Za-z0-9_]+' "$CUDARC_SYS" | sed 's/^pub unsafe fn //' | sort -u \
   | sed 's/.*/int &(void) { return 999; }/' > "$STUBS/libcuda.c"
@@ -61,7 +64,7 @@ cargo build --release --features cuda --bin volgen "$@"
 # What the GPU machine needs beside the binaries: the runtime they link.
 mkdir -p target/cuda/release/lib
 cp -L "$CUDA_HOME/lib/libcudart.so.13" target/cuda/release/lib/
-# The same, stripped and compressed, to move to a GPU machine (about 16 MB; tools/gpu/check.sh
+# The same, stripped and compressed, to move to a GPU machine (about 17 MB; tools/gpu/check.sh
 # unpacks it when there is no target/cuda/release/volgen).
 rm -rf target/cuda/dist && mkdir -p target/cuda/dist/lib
 strip -o target/cuda/dist/volgen target/cuda/release/volgen
@@ -69,4 +72,4 @@ cp target/cuda/release/lib/libcudart.so.13 target/cuda/dist/lib/
 tar -C target/cuda/dist -czf target/cuda/volgen-cuda.tar.gz volgen lib
 ls -l target/cuda/release/volgen target/cuda/release/lib target/cuda/volgen-cuda.tar.gz
 echo "libraries the binary needs on the GPU machine:"
-readelf -d target/cuda/release/volgen | grep NEEDED | grep -oE 'lib(cuda|cublas|curand|nvrtc|cudart)[^]]*'
+readelf -d target/cuda/release/volgen | grep -oE 'lib(cuda|cublas|curand|nvrtc|cudart)[^]]*' || true

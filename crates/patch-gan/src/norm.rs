@@ -191,29 +191,27 @@ impl BatchNorm3d {
                 .sum_keepdim(2)?
                 .sum_keepdim(0)
         };
-        let (mean, var) = if train {
+        let (centred, var) = if train {
             let mean = (channel_sum(&xs.broadcast_mul(mask)?)? / count)?;
-            let centred = xs.broadcast_sub(&mean)?.broadcast_mul(mask)?;
-            (mean, (channel_sum(&centred.sqr()?)? / count)?)
+            let centred = xs.broadcast_sub(&mean)?;
+            let var = (channel_sum(&centred.broadcast_mul(mask)?.sqr()?)? / count)?;
+            (centred, var)
         } else {
             (
-                per_channel(self.running_mean())?,
+                xs.broadcast_sub(&per_channel(self.running_mean())?)?,
                 per_channel(self.running_var())?,
             )
         };
-        let normed = xs
-            .broadcast_sub(&mean)?
-            .broadcast_div(&(var + NORM_EPS)?.sqrt()?)?
-            .broadcast_mul(&per_channel(&self.weight)?)?
-            .broadcast_add(&per_channel(&self.bias)?)?;
-        leaky_relu(&normed, negative_slope)
+        leaky_relu(&self.scale_centred(&centred, &var)?, negative_slope)
     }
 
     /// The same layer in candle ops, for devices without the fused kernel (running statistics are
     /// updated by the CPU path only).
     fn candle_forward(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
         let per_channel = |t: &Tensor| t.reshape((1, (), 1, 1, 1));
-        let (mean, var) = if train {
+        // The centred input is made once and serves the variance and the output (candle keeps
+        // every intermediate until the backward pass).
+        let (centred, var) = if train {
             let mean = xs
                 .mean_keepdim(4)?
                 .mean_keepdim(3)?
@@ -226,16 +224,25 @@ impl BatchNorm3d {
                 .mean_keepdim(3)?
                 .mean_keepdim(2)?
                 .mean_keepdim(0)?;
-            (mean, var)
+            (centred, var)
         } else {
             (
-                per_channel(self.running_mean())?,
+                xs.broadcast_sub(&per_channel(self.running_mean())?)?,
                 per_channel(self.running_var())?,
             )
         };
-        xs.broadcast_sub(&mean)?
-            .broadcast_div(&(var + NORM_EPS)?.sqrt()?)?
-            .broadcast_mul(&per_channel(&self.weight)?)?
+        self.scale_centred(&centred, &var)
+    }
+
+    /// `centred * weight / sqrt(var + eps) + bias` for the candle-op forms. Built for memory,
+    /// as candle keeps every intermediate until the backward pass: the weight and the
+    /// deviation meet per channel, so two tensors of the input's size are made here where
+    /// dividing and scaling the input in turn made four.
+    fn scale_centred(&self, centred: &Tensor, var: &Tensor) -> candle_core::Result<Tensor> {
+        let per_channel = |t: &Tensor| t.reshape((1, (), 1, 1, 1));
+        let scale = per_channel(&self.weight)?.broadcast_div(&(var + NORM_EPS)?.sqrt()?)?;
+        centred
+            .broadcast_mul(&scale)?
             .broadcast_add(&per_channel(&self.bias)?)
     }
 }
@@ -399,6 +406,56 @@ mod tests {
             .to_vec1::<f64>()
             .unwrap();
         assert_eq!(saved, rm);
+    }
+
+    /// The candle-op forms other devices run (BatchNorm on batch statistics, then LeakyReLU by
+    /// ops) give the fused CPU layer's values and gradients, in f64 on the CPU.
+    #[test]
+    fn candle_op_forms_match_the_fused_layer() {
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F64, &Device::Cpu);
+        let bn = batch_norm3d(3, vb).unwrap();
+        {
+            let vars = varmap.data().lock().unwrap();
+            let set = |name: &str, v: &[f64]| {
+                vars[name]
+                    .set(&Tensor::new(v, &Device::Cpu).unwrap())
+                    .unwrap()
+            };
+            set("weight", &[0.5, -1.5, 2.0]);
+            set("bias", &[0.1, 0.0, -0.3]);
+        }
+        let x = candle_core::Var::from_tensor(&input()).unwrap();
+        let fused = bn
+            .forward_activated(x.as_tensor(), None, 0.2, true)
+            .unwrap();
+        let by_ops =
+            crate::fused::leaky_relu_by_ops(&bn.candle_forward(x.as_tensor(), true).unwrap(), 0.2)
+                .unwrap();
+        let probe = Tensor::rand(-1f64, 1., fused.shape(), &Device::Cpu).unwrap();
+        let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        let diff =
+            |a: &[f64], b: &[f64]| a.iter().zip(b).fold(0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(diff(&flat(&fused), &flat(&by_ops)) < 1e-12);
+        let g_fused = (&fused * &probe)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap();
+        let g_ops = (&by_ops * &probe)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap();
+        for var in [x.as_tensor(), &bn.weight, &bn.bias] {
+            let (a, b) = (
+                flat(g_fused.get(var).unwrap()),
+                flat(g_ops.get(var).unwrap()),
+            );
+            assert!(diff(&a, &b) < 1e-10, "gradient differs by {}", diff(&a, &b));
+        }
     }
 
     #[test]

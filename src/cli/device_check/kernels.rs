@@ -4,8 +4,8 @@
 //!
 //! Tolerances are relative to the CPU result's largest value and its L2 norm (see
 //! [`Agreement`]): 1e-4 for the renderer and the convolutions, whose sums are reordered on a
-//! device; 1e-3 for the generator and the critic, whose BatchNorm statistics and penalty norms
-//! divide by sums of many such terms. On the CPU volrender's and patch-gan's own tests hold
+//! device; 1e-3 for the generator, the active set's form and the critic, whose BatchNorm
+//! statistics and penalty norms divide by sums of many such terms. On the CPU volrender's and patch-gan's own tests hold
 //! the renderer and the convolutions to 1e-5.
 
 use std::sync::Arc;
@@ -23,11 +23,22 @@ use volrender::portable::render_portable;
 use volrender::scenes::{make_scene, peer_rays, Scene};
 use volrender::{DensityInterpolation, RenderConfig, Sampler};
 
-use super::compare::{gradients_agree, probe_loss, seeded, weights_on, Agreement};
+use super::compare::{gradients_agree, probe_loss, seed_weights, seeded, weights_on, Agreement};
 use super::CheckContext;
 
 const KERNEL_TOLERANCE: f64 = 1e-4;
 const NETWORK_TOLERANCE: f64 = 1e-3;
+/// The networks' gradients, all weights as one vector: the CPU's own two forms of the active
+/// set (sparse and dense, the same math to 1e-9 in f64) differ in f32 by up to 2.8e-2 of the
+/// largest gradient for some draws of the weights (BatchNorm over half-empty volumes amplifies
+/// rounding), 1.3e-5 to 2.6e-5 for others; a wrong form is off by order 1.
+const NETWORK_GRADIENT_TOLERANCE: f64 = 5e-2;
+
+/// The `paper` preset's generator, for scales above the first.
+fn paper_generator() -> Result<Generator3dConfig> {
+    let layers = singrav::TrainConfig::preset("paper")?.pyramid.layers;
+    Ok(Generator3dConfig::for_scale(2, layers))
+}
 
 /// The renderer: `volrender::portable` on the device against the fused CPU kernel, on the
 /// dense and sparse benchmark scenes (32^3), both uniform samplers and post-activated density;
@@ -70,10 +81,10 @@ pub fn render(cx: &CheckContext) -> Result<Map<String, Value>> {
             let grad_of = |o: &volrender::RenderOutput, var: &Var| -> Result<Tensor> {
                 let out = outputs(o);
                 let grads = probe_loss(&out.iter().collect::<Vec<_>>())?.backward()?;
-                Ok(grads
+                grads
                     .get(var.as_tensor())
                     .cloned()
-                    .unwrap_or(var.as_tensor().zeros_like()?))
+                    .ok_or_else(|| anyhow::anyhow!("the renderer gave the volume no gradient"))
             };
             worst = worst.worst(Agreement::of(
                 &grad_of(&ours, &on_device)?,
@@ -141,6 +152,7 @@ impl<N> Twins<N> {
             DType::F32,
             &Device::Cpu,
         ))?;
+        seed_weights(&cpu_weights, 10)?;
         let device_weights = weights_on(&cpu_weights, &cx.device)?;
         let device = build(VarBuilder::from_varmap(
             &device_weights,
@@ -155,29 +167,44 @@ impl<N> Twins<N> {
         })
     }
 
-    /// The device's output `ours` against the CPU's `reference`, and the gradients of
-    /// `loss` of each with respect to its side's weights.
-    fn agreement(
+    /// The line's fields for the device's output `ours` against the CPU's `reference`, and
+    /// for the gradients of `loss` of each with respect to its side's weights (all weights'
+    /// gradients as one vector): the values held to [`NETWORK_TOLERANCE`], the gradients to
+    /// [`NETWORK_GRADIENT_TOLERANCE`], each one's errors apart.
+    fn report(
         &self,
         ours: &Tensor,
         reference: &Tensor,
         loss: impl Fn(&Tensor) -> Result<Tensor>,
-    ) -> Result<Agreement> {
+    ) -> Result<Map<String, Value>> {
         let gradients = gradients_agree(
             &self.cpu_weights,
             &loss(reference)?.backward()?,
             &self.device_weights,
             &loss(ours)?.backward()?,
         )?;
-        Ok(Agreement::of(ours, reference)?.worst(gradients))
+        let values = Agreement::of(ours, reference)?;
+        let mut fields = Map::new();
+        let values_ok = values.passes(NETWORK_TOLERANCE);
+        let gradients_ok = gradients.passes(NETWORK_GRADIENT_TOLERANCE);
+        fields.insert("ok".into(), json!(values_ok && gradients_ok));
+        for (what, agreement, tolerance) in [
+            ("values", values, NETWORK_TOLERANCE),
+            ("gradients", gradients, NETWORK_GRADIENT_TOLERANCE),
+        ] {
+            fields.insert(format!("{what}_max_error"), json!(agreement.max_error));
+            fields.insert(format!("{what}_l2_error"), json!(agreement.l2_error));
+            fields.insert(format!("{what}_tolerance"), json!(tolerance));
+        }
+        Ok(fields)
     }
 }
 
-/// The paper's generator (5 layers, 32 channels, BatchNorm on batch statistics) at 24^3: one
-/// training-mode forward and the gradient of every weight, as the device runs it against the
+/// The `paper` preset's generator (7 layers, 32 channels, BatchNorm on batch statistics) at
+/// 24^3: one training-mode forward and the gradient of every weight, as the device runs it against the
 /// CPU's kernels.
 pub fn generator(cx: &CheckContext) -> Result<Map<String, Value>> {
-    let config = Generator3dConfig::for_scale(2, 5);
+    let config = paper_generator()?;
     let dims = [1, 4, 24, 24, 24];
     let (z, prev) = (seeded(&dims, 3)?, seeded(&dims, 4)?);
     let g = Twins::new(cx, |vb| Generator3d::new(&config, vb))?;
@@ -187,14 +214,15 @@ pub fn generator(cx: &CheckContext) -> Result<Map<String, Value>> {
         &prev.to_device(&cx.device)?,
         true,
     )?;
-    let mut fields = g
-        .agreement(&ours, &reference, |t| probe_loss(&[t]))?
-        .report(NETWORK_TOLERANCE);
+    let mut fields = g.report(&ours, &reference, |t| probe_loss(&[t]))?;
     fields.insert(
         "compared".into(),
         json!(device_form(
             cx,
-            "Generator3d 24^3, 5 layers, 32 channels: output and every weight's gradient"
+            &format!(
+                "Generator3d 24^3, {} layers, {} channels: output and every weight's gradient",
+                config.layers, config.channels
+            )
         )),
     );
     Ok(fields)
@@ -204,7 +232,7 @@ pub fn generator(cx: &CheckContext) -> Result<Map<String, Value>> {
 /// on the device against the CPU's sparse submanifold form, on a volume with every other
 /// 2x2x2 block active.
 pub fn active_set(cx: &CheckContext) -> Result<Map<String, Value>> {
-    let config = Generator3dConfig::for_scale(2, 5);
+    let config = paper_generator()?;
     let n = 20;
     let dims = [1, 4, n, n, n];
     let (z, prev) = (seeded(&dims, 5)?, seeded(&dims, 6)?);
@@ -223,9 +251,7 @@ pub fn active_set(cx: &CheckContext) -> Result<Map<String, Value>> {
         &sites,
         true,
     )?;
-    let mut fields = g
-        .agreement(&ours, &reference, |t| probe_loss(&[t]))?
-        .report(NETWORK_TOLERANCE);
+    let mut fields = g.report(&ours, &reference, |t| probe_loss(&[t]))?;
     fields.insert(
         "compared".into(),
         json!(format!(
@@ -239,7 +265,7 @@ pub fn active_set(cx: &CheckContext) -> Result<Map<String, Value>> {
 }
 
 /// A critic step: the WGAN loss of real and fake renderings plus the gradient penalty (weight
-/// 0.1, per pixel) of the paper's 2D critic at 54^2, batch 2, and every weight's gradient; the
+/// 0.1, per pixel) of the default 2D critic (5 layers, 32 channels) at 54^2, batch 2, and every weight's gradient; the
 /// device runs candle's double backward where the CPU runs the penalty's first-order form.
 pub fn critic(cx: &CheckContext) -> Result<Map<String, Value>> {
     let config = PatchDiscriminator2dConfig::default();
@@ -258,9 +284,7 @@ pub fn critic(cx: &CheckContext) -> Result<Map<String, Value>> {
         &real.to_device(&cx.device)?,
         &fake.to_device(&cx.device)?,
     )?;
-    let mut fields = d
-        .agreement(&ours, &reference, |t| Ok(t.clone()))?
-        .report(NETWORK_TOLERANCE);
+    let mut fields = d.report(&ours, &reference, |t| Ok(t.clone()))?;
     fields.insert("loss_cpu".into(), json!(reference.to_scalar::<f32>()?));
     fields.insert(
         "loss_device".into(),

@@ -14,6 +14,7 @@ mod kernels;
 mod training;
 
 use std::io::Write;
+use std::panic::AssertUnwindSafe;
 use std::path::PathBuf;
 use std::str::FromStr;
 use std::time::Instant;
@@ -21,6 +22,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use candle_core::Device;
 use serde_json::{json, Map, Value};
+use singrav::TrainConfig;
 
 /// The checks, in the order they run (the cheapest and most telling first).
 const CHECKS: [&str; 8] = [
@@ -34,6 +36,7 @@ const CHECKS: [&str; 8] = [
     "tiny-training",
 ];
 
+/// The options of `volgen device-check`.
 #[derive(Debug, clap::Args)]
 pub struct DeviceCheckArgs {
     /// The device to check: `cuda` (or `cuda:N`, needs a build with the `cuda` feature) or `cpu`
@@ -48,8 +51,9 @@ pub struct DeviceCheckArgs {
     /// at the end).
     #[arg(long, value_name = "DIR")]
     work: Option<PathBuf>,
-    /// Seconds for the whole check: the trainings stop when it is spent (and say so), the
-    /// checks not yet started are reported as skipped.
+    /// Seconds for the whole check, looked at between checks and between training iterations:
+    /// a training stops at the first iteration past it (and says so), the checks not yet
+    /// started are reported as skipped (and count as not passed).
     #[arg(long, default_value_t = 420.0)]
     budget_seconds: f64,
     /// Iterations per scale in `paper-iterations` (the first one is reported apart: it
@@ -125,6 +129,8 @@ impl CheckContext {
     }
 }
 
+/// Runs the checks `args` asks for, printing one JSON line each; errors when one failed or was
+/// skipped.
 pub fn run(args: &DeviceCheckArgs) -> Result<()> {
     let checks = match &args.checks {
         Some(names) => {
@@ -147,8 +153,14 @@ pub fn run(args: &DeviceCheckArgs) -> Result<()> {
     if args.paper_iterations == 0 {
         bail!("--paper-iterations: expected at least 1");
     }
-    if args.budget_seconds.is_nan() || args.budget_seconds < 0.0 {
-        bail!("--budget-seconds: expected a number of seconds >= 0");
+    if args.budget_seconds.is_nan() || args.budget_seconds <= 0.0 {
+        bail!("--budget-seconds: expected a number of seconds > 0");
+    }
+    let paper_scales = TrainConfig::preset("paper")?.scales();
+    if let Some(n) = args.paper_scales {
+        if !(1..=paper_scales).contains(&n) {
+            bail!("--paper-scales: expected 1 to {paper_scales}, got {n}");
+        }
     }
     let device = args.device.open()?;
     let temporary = match &args.work {
@@ -175,24 +187,26 @@ pub fn run(args: &DeviceCheckArgs) -> Result<()> {
         let line = if cx.seconds_left() <= 0.0 {
             let mut details = Map::new();
             details.insert("skipped".into(), json!("the budget is spent"));
-            line(check, &label, None, 0.0, details)
+            json_line(check, &label, None, 0.0, details)
         } else {
             let started = Instant::now();
-            let outcome = run_check(check, &cx);
+            // A panic in a check is a bug; it still gets its line, and the checks after it run.
+            let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| run_check(check, &cx)))
+                .unwrap_or_else(|_| Err(anyhow::anyhow!("the check panicked (see stderr)")));
             let seconds = started.elapsed().as_secs_f64();
             match outcome {
                 Ok(details) => {
                     let ok = details.get("ok").and_then(Value::as_bool).unwrap_or(false);
-                    line(check, &label, Some(ok), seconds, details)
+                    json_line(check, &label, Some(ok), seconds, details)
                 }
                 Err(e) => {
                     let mut details = Map::new();
                     details.insert("error".into(), json!(without_backtrace(&format!("{e:#}"))));
-                    line(check, &label, Some(false), seconds, details)
+                    json_line(check, &label, Some(false), seconds, details)
                 }
             }
         };
-        if line["ok"] == json!(false) {
+        if line["ok"] != json!(true) {
             failed += 1;
         }
         let mut stdout = std::io::stdout().lock();
@@ -204,7 +218,7 @@ pub fn run(args: &DeviceCheckArgs) -> Result<()> {
         let _ = std::fs::remove_dir_all(dir);
     }
     if failed > 0 {
-        bail!("{failed} check(s) failed on {label} (see their JSON lines)");
+        bail!("{failed} check(s) failed or did not run on {label} (see their JSON lines)");
     }
     Ok(())
 }
@@ -223,9 +237,9 @@ fn run_check(check: &str, cx: &CheckContext) -> Result<Map<String, Value>> {
     }
 }
 
-/// One check's JSON line: its name, the device, `ok` (null when skipped), seconds, then the
+/// One check's JSON line: its name, the device, `ok` (null when skipped), seconds, and the
 /// check's own fields (whose `ok`, if any, is the line's).
-fn line(
+fn json_line(
     check: &str,
     device: &str,
     ok: Option<bool>,

@@ -12,7 +12,7 @@ use crate::storage::{self, Kernel};
 /// order (the gradient is the incoming gradient times the slope of the branch the output lies on,
 /// whose own derivative with respect to `x` is zero almost everywhere).
 ///
-/// On the CPU (f32, f64) this is one threaded pass; on other devices it is candle-nn's.
+/// On the CPU (f32, f64) this is one threaded pass; on other devices candle ops.
 ///
 /// ```
 /// use candle_core::{Device, Tensor};
@@ -23,9 +23,21 @@ use crate::storage::{self, Kernel};
 /// ```
 pub fn leaky_relu(xs: &Tensor, negative_slope: f64) -> candle_core::Result<Tensor> {
     if !xs.device().is_cpu() {
-        return candle_nn::ops::leaky_relu(xs, negative_slope);
+        return leaky_relu_by_ops(xs, negative_slope);
     }
     xs.contiguous()?.apply_op1(Leaky(negative_slope))
+}
+
+/// [`leaky_relu`] from candle ops, for devices without the CPU kernel: `x * slope(x)`, the
+/// slope (1 or `negative_slope`) a constant of the graph, as it is almost everywhere. Two
+/// tensors of the input's size are kept for the backward pass (candle keeps every intermediate)
+/// where candle-nn's `max(x, 0) + slope * min(x, 0)` keeps five.
+pub(crate) fn leaky_relu_by_ops(xs: &Tensor, negative_slope: f64) -> candle_core::Result<Tensor> {
+    let slope = xs
+        .ge(0.0)?
+        .to_dtype(xs.dtype())?
+        .affine(1.0 - negative_slope, negative_slope)?;
+    xs * slope
 }
 
 /// `LeakyReLU(x + bias)` with `bias` `(C,)` added along axis 1 of `xs` `(N, C, ...)`: a

@@ -20,6 +20,9 @@ pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
 pub(crate) use conv_leaky::conv_bias_leaky;
 pub(crate) use conv_stack::{conv_norm_stack, StackBlock};
 pub(crate) use leaky::{bias_add, leaky_grad};
+// The device form of LeakyReLU, which the CPU's tests compare with the fused kernel.
+#[cfg(test)]
+pub(crate) use leaky::leaky_relu_by_ops;
 pub use leaky::{bias_leaky_relu, leaky_relu};
 
 /// The `(channels, plane)` split of an `(N, C, ...)` tensor: `C` and the product of the axes after it.
