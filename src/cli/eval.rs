@@ -215,6 +215,9 @@ fn print_report(e: &Evaluation) {
     if let Some(v_star) = e.reconstruction_layout_distance {
         println!("reconstruction_layout:     {v_star:.4}  (V*'s own layout distance from the fit)");
     }
+    if let Some(v_star) = e.reconstruction_misplaced_matter {
+        println!("reconstruction_misplaced:  {v_star:.4}  (V*'s own matter out of place against the fit)");
+    }
     println!(
         "                           (± one standard error over the {} scenes: their sampling \
          noise, not a difference between runs)",
@@ -265,6 +268,11 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
         }
     );
     println!(
+        "misplaced_matter:          {}  (share of matter where the scene has none of its colour \
+         nearby; lower = arrangement kept)",
+        cell(Some(e.misplaced_matter), e.misplaced_matter_stderr, 4)
+    );
+    println!(
         "Diversity-MV:              {}  (higher = more varied scenes)",
         cell(e.diversity_mv, e.diversity_mv_stderr, 4)
     );
@@ -286,8 +294,8 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
 fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
-         patch SWD-MV | colour SWD | floaters | layout | Diversity-MV | SIFID-MV |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         patch SWD-MV | colour SWD | floaters | layout | misplaced | Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
         let cells: Vec<String> = columns(&e.numbers)
@@ -358,12 +366,13 @@ fn columns(e: &Evaluation) -> Vec<Column> {
 }
 
 /// The sample metrics' columns of the table.
-fn sample_columns(e: &SceneScores) -> [Column; 6] {
+fn sample_columns(e: &SceneScores) -> [Column; 7] {
     [
         (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
         (Some(e.colour_swd), e.colour_swd_stderr, 4),
         (e.floaters, e.floaters_stderr, 4),
         (Some(e.layout_distance), e.layout_distance_stderr, 4),
+        (Some(e.misplaced_matter), e.misplaced_matter_stderr, 4),
         (e.diversity_mv, e.diversity_mv_stderr, 4),
         (e.sifid_mv, None, 4),
     ]

@@ -15,7 +15,9 @@
 //! - [`floaters`]: the mean opacity generated scenes put where the real views are empty.
 //! - [`layout_distance`]: how far a generated volume's matter is from the scene's, in position
 //!   and colour (arrangement, which the image metrics cannot see); [`kind_layout_distance`]:
-//!   the same by kind of matter ([`MatterKinds`]), each kind with an equal say.
+//!   the same by kind of matter ([`MatterKinds`]), each kind with an equal say;
+//!   [`MatterSupport::misplaced`]: the share of a volume's matter standing where the scene has
+//!   no matter of its kind nearby (matter out of place, which true variants of a scene avoid).
 //! - [`Estimate`]: a metric over scenes with its standard error over scenes (per-scene values
 //!   from [`floaters_per_scene`], [`colour_swd_per_scene`], [`patch_swd_per_scene`]; a
 //!   jackknife for [`diversity_mv`]).
@@ -32,6 +34,7 @@ mod frechet;
 mod inception;
 mod layout;
 mod matter_kinds;
+mod misplaced;
 mod patch_swd;
 mod psnr;
 mod sifid;
@@ -47,6 +50,7 @@ pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
 pub use layout::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
 pub use matter_kinds::{kind_layout_distance, kind_layout_distances, MatterKinds, MATTER_KINDS};
+pub use misplaced::{MatterSupport, MISPLACED_KINDS, MISPLACED_REACH};
 pub use patch_swd::{
     patch_swd_mv, patch_swd_per_scene, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED,
 };

@@ -101,28 +101,34 @@ impl MatterKinds {
     fn split(&self, points: &LayoutPoints) -> Vec<LayoutPoints> {
         let mut per_kind: Vec<Vec<f64>> = vec![Vec::with_capacity(points.len()); self.len()];
         for (point, &w) in points.points.iter().zip(&points.weights) {
-            let colour = colour_of(point);
-            let closeness: Vec<f64> = self
-                .colours
-                .iter()
-                .map(|kind| {
-                    (-squared_distance(&colour, kind) / (2.0 * KIND_WIDTH * KIND_WIDTH)).exp()
-                })
-                .collect();
-            let total: f64 = closeness.iter().sum();
-            for (kind, share) in per_kind.iter_mut().zip(&closeness) {
-                // A colour far from every kind (total underflowing to 0) is shared equally.
-                kind.push(if total > 0.0 {
-                    w * share / total
-                } else {
-                    w / self.len() as f64
-                });
+            for (kind, share) in per_kind.iter_mut().zip(self.shares(point)) {
+                kind.push(w * share);
             }
         }
         per_kind
             .into_iter()
             .map(|weights| LayoutPoints::reweighted(points, weights))
             .collect()
+    }
+
+    /// A point's share of each kind (summing to 1): falling as
+    /// `exp(-|colour - kind_k|^2 / (2 KIND_WIDTH^2))` with the distance of its colour from the
+    /// kind's, normalised over the kinds.
+    pub(crate) fn shares(&self, point: &[f32; DIMS]) -> Vec<f64> {
+        let colour = colour_of(point);
+        let mut closeness: Vec<f64> = self
+            .colours
+            .iter()
+            .map(|kind| (-squared_distance(&colour, kind) / (2.0 * KIND_WIDTH * KIND_WIDTH)).exp())
+            .collect();
+        let total: f64 = closeness.iter().sum();
+        if total > 0.0 {
+            closeness.iter_mut().for_each(|c| *c /= total);
+        } else {
+            // A colour far from every kind (every closeness underflowing to 0) is shared equally.
+            closeness.fill(1.0 / self.len() as f64);
+        }
+        closeness
     }
 }
 

@@ -5,9 +5,10 @@
 use candle_core::Tensor;
 use radiance_volume::GridDims;
 use rgbd_dataset::{Dataset, SceneSource};
-use scene_metrics::{InceptionBlock1, LayoutPoints};
+use scene_metrics::InceptionBlock1;
 use serde::Serialize;
 
+use super::arrangement::SceneMatter;
 use super::scores::{SceneScores, SeenScenes};
 use crate::error::Result;
 
@@ -41,13 +42,13 @@ pub struct Family {
 impl Family {
     /// Bakes `count` other layouts of `source` on its grid, renders them from `views.frames`'s
     /// cameras as the dataset was rendered ([`Dataset::rendered`]), resizes them as the real
-    /// views are, and scores them against `real` and `real_alpha` with the layout distance
-    /// from `reference`.
+    /// views are, and scores them against `real` and `real_alpha`, their arrangement against
+    /// `reference`.
     pub(super) fn score(
         source: SceneSource,
         count: usize,
         views: &FamilyViews,
-        reference: &LayoutPoints,
+        reference: &SceneMatter,
         real: &Tensor,
         real_alpha: &Tensor,
         inception: Option<&InceptionBlock1>,
@@ -65,7 +66,7 @@ impl Family {
             seen.opacity
                 .push(rendered.level(size, size, device)?.opacity);
             let coarse = scene.to_volume(GridDims::cube(views.grid))?;
-            seen.layouts.push(super::layout_from(reference, &coarse)?);
+            seen.push_arrangement(reference.arrangement(&coarse)?);
         }
         Ok(Self {
             scene: source.kind.name().to_owned(),

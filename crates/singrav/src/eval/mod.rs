@@ -10,9 +10,11 @@
 //! - the generated scenes against [`EvalConfig::views`] views spread over all frames: patch
 //!   SWD-MV, colour SWD, floaters, Diversity-MV (each with its standard error over scenes) and,
 //!   given InceptionV3's first block, SIFID-MV;
-//! - the generated volumes' arrangement: their [`layout_distance`] from the scene's volume,
-//!   which is a direct fit of the training views ([`LayoutReference::Fit`]) or V*
-//!   ([`LayoutReference::Reconstruction`]);
+//! - the generated volumes' arrangement against the scene's volume, which is a direct fit of
+//!   the training views ([`LayoutReference::Fit`]) or V* ([`LayoutReference::Reconstruction`]):
+//!   their [`layout_distance`](scene_metrics::layout_distance) from it, and their share of
+//!   matter out of place ([`MatterSupport::misplaced`](scene_metrics::MatterSupport::misplaced):
+//!   standing where the scene has no matter of its colour nearby);
 //! - for a dataset of a built-in scene, with [`EvalConfig::family`], the same sample metrics
 //!   of the scene's other layouts seen from the same views ([`Family`]): what a perfect
 //!   generator of that kind of scene scores.
@@ -27,20 +29,19 @@
 //! ```
 
 use candle_core::Tensor;
-use radiance_volume::RadianceVolume;
 use rand::SeedableRng;
 use rgbd_dataset::Dataset;
-use scene_metrics::{
-    depth_rmse, layout_distance, mean_psnr, mean_ssim, InceptionBlock1, LayoutPoints,
-    LayoutWeighting, LAYOUT_DIRECTIONS,
-};
+use scene_metrics::{depth_rmse, mean_psnr, mean_ssim, InceptionBlock1};
 use serde::Serialize;
 
 use crate::error::{invalid, Result};
 use crate::SinGrav;
 
+mod arrangement;
 mod family;
 mod scores;
+
+use arrangement::SceneMatter;
 
 pub use family::Family;
 pub use scores::SceneScores;
@@ -158,6 +159,8 @@ pub struct Evaluation {
     pub samples: SceneScores,
     /// V*'s layout distance from the fit (None when V* is the reference).
     pub reconstruction_layout_distance: Option<f64>,
+    /// V*'s share of matter out of place against the fit (None when V* is the reference).
+    pub reconstruction_misplaced_matter: Option<f64>,
     /// What the layout distances are measured against: `fit` (a direct fit of the training
     /// views) or `vstar`.
     pub layout_reference: String,
@@ -230,9 +233,9 @@ pub fn evaluate(
     };
 
     let v_star = model.reconstruct()?;
-    let reference = layout_reference(model, &v_star, scene_dataset, config.layout_reference)?;
-    let reconstruction_layout = match config.layout_reference {
-        LayoutReference::Fit => Some(layout_from(&reference, &model.to_physical(&v_star)?)?),
+    let reference = scene_matter(model, &v_star, scene_dataset, config.layout_reference)?;
+    let reconstruction_arrangement = match config.layout_reference {
+        LayoutReference::Fit => Some(reference.arrangement(&model.to_physical(&v_star)?)?),
         LayoutReference::Reconstruction => None,
     };
     let reconstruction = reproduction(model, &v_star, dataset, &spread(&training, config.views))?;
@@ -256,8 +259,7 @@ pub fn evaluate(
         // As `SinGrav::sample_varying_from` draws them: scene i here is scene i of
         // `volgen sample --vary-from`.
         let raw = model.generate_random_from(&mut rng, config.vary_from)?;
-        seen.layouts
-            .push(layout_from(&reference, &model.to_physical(&raw)?)?);
+        seen.push_arrangement(reference.arrangement(&model.to_physical(&raw)?)?);
         let maps = model.render_maps(&raw, &coarse.cameras)?;
         seen.views.push(maps.rgb);
         seen.opacity.push(maps.opacity);
@@ -308,7 +310,8 @@ pub fn evaluate(
         held_out_volume_psnr,
         vary_from: config.vary_from,
         samples,
-        reconstruction_layout_distance: reconstruction_layout,
+        reconstruction_layout_distance: reconstruction_arrangement.as_ref().map(|a| a.distance),
+        reconstruction_misplaced_matter: reconstruction_arrangement.as_ref().map(|a| a.misplaced),
         layout_reference: match config.layout_reference {
             LayoutReference::Fit => "fit".into(),
             LayoutReference::Reconstruction => "vstar".into(),
@@ -317,51 +320,22 @@ pub fn evaluate(
     })
 }
 
-/// The matter of the scene's volume that layouts are measured against, in the scene's
-/// coordinates: a fit of `dataset`'s training views, or V*.
-fn layout_reference(
+/// The scene's matter that arrangements are measured against, in the scene's coordinates: a
+/// fit of `dataset`'s training views, or V*.
+fn scene_matter(
     model: &SinGrav,
     v_star: &Tensor,
     dataset: &Dataset,
     reference: LayoutReference,
-) -> Result<LayoutPoints> {
+) -> Result<SceneMatter> {
     let volume = match reference {
         LayoutReference::Fit => {
             crate::train::fit_training_target(model.config(), dataset, None, &mut |_| {})?.volume
         }
         LayoutReference::Reconstruction => model.to_physical(v_star)?,
     };
-    layout_points(&volume)
+    SceneMatter::of(&volume)
 }
-
-/// A physical volume's matter as layout points, as seen from above
-/// ([`LayoutWeighting::SeenFromAbove`]): a fit of views holds fog where no view sees (below
-/// the ground), and a generated volume holds what it likes there; weighted by opacity alone,
-/// that hidden matter outweighed the arrangement on top (docs/metrics.md, "layout_distance").
-fn layout_points(volume: &RadianceVolume) -> Result<LayoutPoints> {
-    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
-    Ok(LayoutPoints::from_volume_weighted(
-        volume.tensor(),
-        voxel,
-        LayoutWeighting::SeenFromAbove,
-    )?)
-}
-
-/// The layout distance of `volume` from the reference's matter (infinite for a volume with no
-/// matter: [`layout_distance`]).
-pub(super) fn layout_from(reference: &LayoutPoints, volume: &RadianceVolume) -> Result<f64> {
-    let points = layout_points(volume)?;
-    Ok(layout_distance(
-        reference,
-        &points,
-        LAYOUT_DIRECTIONS,
-        LAYOUT_SEED,
-    )?)
-}
-
-/// The seed of the layout distance's directions: the same for every evaluation, so that
-/// distances compare across runs.
-const LAYOUT_SEED: u64 = 0;
 
 /// V* against the dataset's `frames`: colour at the final size, depth at the 3D pyramid's.
 fn reproduction(

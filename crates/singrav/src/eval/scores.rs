@@ -8,6 +8,7 @@ use scene_metrics::{
 };
 use serde::Serialize;
 
+use super::arrangement::Arrangement;
 use crate::error::Result;
 
 /// Scenes as the evaluation sees them, one entry per scene.
@@ -18,6 +19,8 @@ pub(super) struct SeenScenes {
     pub opacity: Vec<Tensor>,
     /// Layout distances from the scene's volume.
     pub layouts: Vec<f64>,
+    /// Shares of matter out of place against the scene's volume.
+    pub misplaced: Vec<f64>,
 }
 
 impl SeenScenes {
@@ -26,7 +29,14 @@ impl SeenScenes {
             views: Vec::with_capacity(scenes),
             opacity: Vec::with_capacity(scenes),
             layouts: Vec::with_capacity(scenes),
+            misplaced: Vec::with_capacity(scenes),
         }
+    }
+
+    /// Records the next scene's arrangement.
+    pub fn push_arrangement(&mut self, arrangement: Arrangement) {
+        self.layouts.push(arrangement.distance);
+        self.misplaced.push(arrangement.misplaced);
     }
 }
 
@@ -61,6 +71,12 @@ pub struct SceneScores {
     pub layout_distance: f64,
     /// Its standard error over scenes.
     pub layout_distance_stderr: Option<f64>,
+    /// The volumes' mean share of matter out of place against the evaluation's reference
+    /// volume ([`MatterSupport::misplaced`](scene_metrics::MatterSupport::misplaced)): matter
+    /// standing where the scene has none of its colour nearby; lower keeps the arrangement.
+    pub misplaced_matter: f64,
+    /// Its standard error over scenes.
+    pub misplaced_matter_stderr: Option<f64>,
 }
 
 impl SceneScores {
@@ -78,6 +94,7 @@ impl SceneScores {
             .transpose()?;
         let colour = mean_and_error(&colour_swd_per_scene(&seen.views, real)?)?;
         let layout = mean_and_error(&seen.layouts)?;
+        let misplaced = mean_and_error(&seen.misplaced)?;
         let floaters = floaters_per_scene(&seen.opacity, real_alpha)?
             .map(|per_scene| mean_and_error(&per_scene))
             .transpose()?;
@@ -106,6 +123,8 @@ impl SceneScores {
                 .transpose()?,
             layout_distance: layout.0,
             layout_distance_stderr: layout.1,
+            misplaced_matter: misplaced.0,
+            misplaced_matter_stderr: misplaced.1,
         })
     }
 }
