@@ -579,6 +579,142 @@ fn edit_removal_empties_the_box_and_keeps_the_rest() {
     assert!(!both.path().join("harmonized.safetensors").exists());
 }
 
+/// `volgen compose`: each taken box holds exactly the source scene's voxels at its new place
+/// (the scene `volgen sample --seed` makes first, as `edit` writes it as `original`), the rest
+/// is the base's; without `--base` the base is V*'s ground; bad takes are refused by name.
+#[test]
+fn compose_puts_boxes_of_other_scenes_into_a_base_and_names_bad_takes() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    // The sources as `edit` writes them: seed 5's and seed 6's scenes, unharmonised.
+    for seed in ["5", "6"] {
+        let dir = tmp.path().join(format!("scene{seed}"));
+        ok(&volgen(&[
+            "edit",
+            path(model),
+            "--seed",
+            seed,
+            "--out",
+            path(&dir),
+            "--remove",
+            "0.9,0.9,0.9,1,1,1",
+            "--no-harmonize",
+        ]));
+    }
+    let out = tmp.path().join("composed");
+    let text = ok(&volgen(&[
+        "compose",
+        path(model),
+        "--out",
+        path(&out),
+        "--base",
+        "6",
+        "--take",
+        "5:-1,-1,-1,-0.1,-0.1,-0.1",
+        "--at",
+        "1.09,1.09,0",
+        "--take",
+        "6:0.1,0.1,0.1,1,1,1",
+        "--at",
+        "-1.09,-1.09,-1.09",
+    ]));
+    assert!(
+        text.contains("seed 5: -1,-1,-1,-0.1,-0.1,-0.1 at 1.09,1.09,0"),
+        "{text}"
+    );
+    for stem in ["base", "composed", "harmonized"] {
+        assert!(out.join(format!("{stem}.png")).is_file(), "{stem}.png");
+    }
+    let original =
+        |seed: &str| volume_values(&tmp.path().join(format!("scene{seed}/original.safetensors")));
+    let (five, six) = (original("5"), original("6"));
+    assert_eq!(volume_values(&out.join("base.safetensors")), six);
+    let composed = volume_values(&out.join("composed.safetensors"));
+    let grid = *RadianceVolume::load_safetensors(out.join("base.safetensors"))
+        .unwrap()
+        .grid();
+    let dims = grid.dims;
+    // micro's 11^3 grid: cell centres below -0.1 are cells 0..5, above 0.1 cells 6..11, and
+    // 1.09 is 5.995 voxels of 2/11: the takes move by 6 cells.
+    assert_eq!(dims.w, 11);
+    let n = dims.voxel_count();
+    let (low, high) = (0..5, 6..11);
+    for z in 0..dims.d {
+        for y in 0..dims.h {
+            for x in 0..dims.w {
+                let i = dims.index(z, y, x);
+                // The first take lands at high x and y, low z, from seed 5's low corner; the
+                // second at the low corner, from seed 6's high one.
+                let want = if high.contains(&x) && high.contains(&y) && low.contains(&z) {
+                    Some((&five, dims.index(z, y - 6, x - 6)))
+                } else if low.contains(&x) && low.contains(&y) && low.contains(&z) {
+                    Some((&six, dims.index(z + 6, y + 6, x + 6)))
+                } else {
+                    None
+                };
+                for c in 0..4 {
+                    let expected = match want {
+                        Some((source, j)) => source[c * n + j],
+                        None => six[c * n + i],
+                    };
+                    assert_eq!(composed[c * n + i], expected, "({x}, {y}, {z}) channel {c}");
+                }
+            }
+        }
+    }
+
+    // Without --base: V*'s ground, never denser than V* itself.
+    let ground = tmp.path().join("ground");
+    let text = ok(&volgen(&[
+        "compose",
+        path(model),
+        "--out",
+        path(&ground),
+        "--take",
+        "5:-0.5,-0.5,-1,0.5,0.5,1",
+        "--at",
+        "0,0,0",
+        "--no-harmonize",
+    ]));
+    assert!(text.contains("the ground of V*"), "{text}");
+    assert!(!ground.join("harmonized.safetensors").exists());
+
+    let compose = |extra: &[&str]| {
+        let mut args = vec!["compose", path(model), "--out", path(&ground)];
+        args.extend_from_slice(extra);
+        failure(&volgen(&args))
+    };
+    let cases: [(&[&str], &[&str]); 5] = [
+        (&[], &["nothing to compose"]),
+        (
+            &["--take", "0,0,0,1,1,1", "--at", "0,0,0"],
+            &["--take", "SEED:"],
+        ),
+        (
+            &["--take", "1:0,0,0,0.5,0.5,0.5", "--at", "0.8,0,0"],
+            &["placement `0,0,0,0.5,0.5,0.5 at 0.8,0,0`", "destination"],
+        ),
+        (&["--take", "1:0,0,0,0.5,0.5,0.5"], &["--at"]),
+        (
+            &[
+                "--take",
+                "1:0,0,0,0.5,0.5,0.5",
+                "--at",
+                "0,0",
+                "--base",
+                "2",
+            ],
+            &["--at", "three comma-separated numbers"],
+        ),
+    ];
+    for (args, expected) in cases {
+        let err = compose(args);
+        for needle in expected {
+            assert!(err.contains(needle), "{args:?}: {err}");
+        }
+    }
+}
+
 #[test]
 fn animate_and_edit_name_the_bad_flag() {
     let model = trained_micro();

@@ -5,18 +5,21 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod animate;
+mod compose;
 mod demo;
 mod device_check;
 mod edit;
 mod eval;
 mod export;
 mod fit;
+mod harmonize;
 mod info;
 mod mesh;
 mod model_io;
 mod render;
 mod sample;
 mod scene;
+mod scene_boxes;
 mod train;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.
@@ -49,6 +52,8 @@ enum Command {
     Animate(animate::AnimateArgs),
     /// Edit a generated scene (remove, duplicate, move boxes) and harmonise it with the generators.
     Edit(edit::EditArgs),
+    /// Compose objects of several generated scenes into one and harmonise it with the generators.
+    Compose(compose::ComposeArgs),
     /// The whole pipeline: dataset of a built-in scene, tiny training, samples, pictures, VDB.
     Demo(demo::DemoArgs),
     /// The paper's metrics of a trained model: Diversity-MV, and SIFID-MV with InceptionV3 weights.
@@ -77,6 +82,7 @@ pub fn run() -> ExitCode {
         Command::Sample(args) => sample::run(&args),
         Command::Animate(args) => animate::run(&args),
         Command::Edit(args) => edit::run(&args),
+        Command::Compose(args) => compose::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::DeviceCheck(args) => device_check::run(&args),

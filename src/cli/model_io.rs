@@ -1,6 +1,6 @@
 //! Shared by the commands that generate scenes from a trained model (`sample`, `animate`,
-//! `edit`): loading the model, and writing one scene's files (physical volume, views, and
-//! VDB / EXR slices and meshes on request).
+//! `edit`, `compose`): loading the model, and writing one scene's files (physical volume,
+//! views, and VDB / EXR slices and meshes on request).
 
 use std::path::{Path, PathBuf};
 
@@ -120,4 +120,25 @@ pub fn write_scene(
             .with_context(|| format!("writing the mesh {}", file.display()))?;
     }
     Ok(dir.join(format!("{stem}.*")))
+}
+
+/// Writes the scenes of a command that changes a generated scene (`edit`, `compose`): each raw
+/// volume rendered from the same cameras and written with the same outputs, and named on
+/// standard output with what was done.
+pub struct SceneWriter<'a> {
+    pub model: &'a SinGrav,
+    pub cameras: Vec<volrender::Camera>,
+    pub dir: &'a Path,
+    pub outputs: Outputs,
+}
+
+impl SceneWriter<'_> {
+    /// Writes `raw` as `stem` ([`write_scene`]) and prints `stem: what -> files`.
+    pub fn write(&self, stem: &str, raw: &Tensor, what: String) -> Result<()> {
+        let volume = self.outputs.volume(self.model, raw)?;
+        let views = self.model.render_raw(raw, &self.cameras)?;
+        let files = write_scene(self.dir, stem, &volume, &views, self.outputs)?;
+        println!("{stem}: {what} -> {}", files.display());
+        Ok(())
+    }
 }

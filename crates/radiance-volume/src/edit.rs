@@ -164,15 +164,52 @@ impl RadianceVolume {
         offset: [i64; 3],
         fill_source: Option<&[f32]>,
     ) -> Result<Self> {
-        let mask = self.check_mask(mask)?;
-        let moved = shift_dhw(self.tensor(), offset)?;
-        let moved_mask = shift_dhw(&mask, offset)?;
         let base = match fill_source {
-            Some(empty) => self.fill_masked(&mask.squeeze(0)?, empty)?,
+            Some(empty) => self.fill_masked(mask, empty)?,
             None => self.clone(),
         };
+        base.paste_masked(self, mask, offset)
+    }
+
+    /// Returns a copy where the masked region of `source` (a volume on the same grid, with the
+    /// same channels), moved `offset = (dz, dy, dx)` cells, replaces what is there: an object
+    /// of another scene put into this one (the paper's composition). Parts moved beyond the
+    /// grid are dropped; [`RadianceVolume::translate_masked`] is this with `source = self`.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use radiance_volume::{Aabb, RadianceVolume};
+    /// let zeros = Tensor::zeros((4, 1, 1, 4), candle_core::DType::F32, &Device::Cpu)?;
+    /// let base = RadianceVolume::new(zeros, Aabb::CUBE)?;
+    /// let source = RadianceVolume::new(Tensor::ones((4, 1, 1, 4), candle_core::DType::F32, &Device::Cpu)?, Aabb::CUBE)?;
+    /// let first = Tensor::new(&[[[1f32, 0.0, 0.0, 0.0]]], &Device::Cpu)?;
+    /// // The source's first cell, put two cells along x.
+    /// let pasted = base.paste_masked(&source, &first, [0, 0, 2])?;
+    /// let density: Vec<f32> = pasted.tensor().get(0)?.flatten_all()?.to_vec1()?;
+    /// assert_eq!(density, [0.0, 0.0, 1.0, 0.0]);
+    /// # Ok::<(), radiance_volume::Error>(())
+    /// ```
+    pub fn paste_masked(
+        &self,
+        source: &RadianceVolume,
+        mask: &Tensor,
+        offset: [i64; 3],
+    ) -> Result<Self> {
+        if source.tensor().dims() != self.tensor().dims() {
+            return Err(invalid(
+                "source",
+                format!(
+                    "expected a volume of the same shape {:?}, got {:?}",
+                    self.tensor().dims(),
+                    source.tensor().dims()
+                ),
+            ));
+        }
+        let mask = self.check_mask(mask)?;
+        let moved = shift_dhw(source.tensor(), offset)?;
+        let moved_mask = shift_dhw(&mask, offset)?;
         let keep = moved_mask.affine(-1.0, 1.0)?;
-        let data = (base.tensor().broadcast_mul(&keep)? + moved.broadcast_mul(&moved_mask)?)?;
+        let data = (self.tensor().broadcast_mul(&keep)? + moved.broadcast_mul(&moved_mask)?)?;
         self.with_tensor(data)
     }
 

@@ -1,6 +1,6 @@
 //! Crop, paste, masks and the paper's edit primitives.
 
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use glam::Vec3;
 use radiance_volume::{Aabb, GridDims, RadianceVolume, VoxelRange};
 
@@ -111,4 +111,39 @@ fn duplicate_and_move_copy_the_masked_region() {
     // Shifting everything out of the grid drops it.
     let gone = values(&v.translate_masked(&mask, [0, 0, 9], Some(&empty)).unwrap());
     assert_eq!(gone[src], 0.0);
+}
+
+#[test]
+fn paste_masked_puts_another_volumes_region_in_place() {
+    let dims = GridDims::cube(6);
+    let source = numbered(dims);
+    let zeros = Tensor::zeros((4, 6, 6, 6), DType::F32, &Device::Cpu).unwrap();
+    let base = RadianceVolume::new(zeros, Aabb::CUBE).unwrap();
+    let mut m = vec![0f32; dims.voxel_count()];
+    m[dims.index(1, 1, 1)] = 1.0;
+    m[dims.index(1, 2, 1)] = 1.0;
+    let mask = Tensor::from_vec(m, (6, 6, 6), &Device::Cpu).unwrap();
+    let pasted = values(&base.paste_masked(&source, &mask, [0, 3, -1]).unwrap());
+    let from = values(&source);
+    let n = dims.voxel_count();
+    for c in 0..4 {
+        assert_eq!(
+            pasted[c * n + dims.index(1, 4, 0)],
+            from[c * n + dims.index(1, 1, 1)]
+        );
+        assert_eq!(
+            pasted[c * n + dims.index(1, 5, 0)],
+            from[c * n + dims.index(1, 2, 1)]
+        );
+    }
+    // Everything else stays the base's.
+    assert_eq!(pasted.iter().filter(|v| **v != 0.0).count(), 8);
+    // With the volume itself as its source, pasting is translate_masked's duplicate.
+    let own = values(&source.paste_masked(&source, &mask, [0, 3, -1]).unwrap());
+    let dup = values(&source.translate_masked(&mask, [0, 3, -1], None).unwrap());
+    assert_eq!(own, dup);
+    // A source on another grid is refused.
+    let small = numbered(GridDims::cube(4));
+    let err = base.paste_masked(&small, &mask, [0, 0, 0]).unwrap_err();
+    assert!(err.to_string().contains("same shape"), "{err}");
 }

@@ -98,17 +98,8 @@ impl Edit {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn validate(&self) -> Result<()> {
-        let fail = |why: String| invalid(format!("edit `{self}`"), why);
         let (region, offset) = self.parts();
-        check_inside("box", region).map_err(fail)?;
-        if let Some(offset) = offset {
-            let destination = Aabb {
-                min: region.min + offset,
-                max: region.max + offset,
-            };
-            check_inside("destination", destination).map_err(fail)?;
-        }
-        Ok(())
+        check_placement(region, offset).map_err(|why| invalid(format!("edit `{self}`"), why))
     }
 
     /// Applies the edit to a raw volume `(1, 4, s, s, s)` over `[-1, 1]^3` (a scene's finest 3D
@@ -135,39 +126,82 @@ impl Edit {
     /// ```
     pub fn apply(&self, raw: &Tensor, empty: &[f32; 4]) -> Result<Tensor> {
         let fail = |why: String| invalid(format!("edit `{self}`"), why);
-        let dims = raw.dims();
-        if dims.len() != 5 || dims[0] != 1 || dims[1] != 4 {
-            return Err(fail(format!(
-                "expected a raw volume (1, 4, D, H, W), got shape {dims:?}"
-            )));
-        }
+        let volume = raw_volume(raw).map_err(fail)?;
         self.validate()?;
-        let volume = RadianceVolume::new(raw.squeeze(0)?, Aabb::CUBE)?;
         let (region, offset) = self.parts();
-        let mask = volume.box_mask(region)?;
-        if mask.sum_all()?.to_scalar::<f32>()? == 0.0 {
-            return Err(fail(format!(
-                "the box holds no voxel centre of the {:?} grid (voxels are {} wide); make it larger",
-                volume.dims().xyz(),
-                volume.grid().voxel_size().x
-            )));
-        }
+        let mask = box_mask(&volume, region).map_err(fail)?;
         let Some(offset) = offset else {
             return Ok(volume.fill_masked(&mask, empty)?.tensor().unsqueeze(0)?);
         };
-        let cells = (offset / volume.grid().voxel_size()).round();
-        if cells == Vec3::ZERO {
+        let shift = voxel_shift(&volume, offset);
+        if shift == [0; 3] {
             return Err(fail(format!(
                 "the offset moves the box by less than half a voxel ({} wide)",
                 volume.grid().voxel_size().x
             )));
         }
         let fill_source = matches!(self, Self::Move { .. }).then_some(empty.as_slice());
-        // translate_masked takes (dz, dy, dx): D runs along z, W along x.
-        let shift = [cells.z as i64, cells.y as i64, cells.x as i64];
         let edited = volume.translate_masked(&mask, shift, fill_source)?;
         Ok(edited.tensor().unsqueeze(0)?)
     }
+}
+
+/// A raw volume `(1, 4, D, H, W)` over `[-1, 1]^3` as a radiance volume, or why not (for a
+/// message naming the edit or placement).
+pub(super) fn raw_volume(raw: &Tensor) -> std::result::Result<RadianceVolume, String> {
+    let dims = raw.dims();
+    if dims.len() != 5 || dims[0] != 1 || dims[1] != 4 {
+        return Err(format!(
+            "expected a raw volume (1, 4, D, H, W), got shape {dims:?}"
+        ));
+    }
+    raw.squeeze(0)
+        .map_err(|e| e.to_string())
+        .and_then(|t| RadianceVolume::new(t, Aabb::CUBE).map_err(|e| e.to_string()))
+}
+
+/// The mask of the voxels whose centres `region` holds, or why it cannot be used (it holds
+/// none).
+pub(super) fn box_mask(
+    volume: &RadianceVolume,
+    region: Aabb,
+) -> std::result::Result<Tensor, String> {
+    let mask = volume.box_mask(region).map_err(|e| e.to_string())?;
+    let count = mask
+        .sum_all()
+        .and_then(|m| m.to_scalar::<f32>())
+        .map_err(|e| e.to_string())?;
+    if count == 0.0 {
+        return Err(format!(
+            "the box holds no voxel centre of the {:?} grid (voxels are {} wide); make it larger",
+            volume.dims().xyz(),
+            volume.grid().voxel_size().x
+        ));
+    }
+    Ok(mask)
+}
+
+/// An offset in world units as whole voxels `(dz, dy, dx)` of `volume`'s grid, the order
+/// [`RadianceVolume::translate_masked`] takes (D runs along z, W along x).
+pub(super) fn voxel_shift(volume: &RadianceVolume, offset: Vec3) -> [i64; 3] {
+    let cells = (offset / volume.grid().voxel_size()).round();
+    [cells.z as i64, cells.y as i64, cells.x as i64]
+}
+
+/// Errors unless `region` and, with an offset, `region` moved by it lie inside the volume box.
+pub(super) fn check_placement(
+    region: Aabb,
+    offset: Option<Vec3>,
+) -> std::result::Result<(), String> {
+    check_inside("box", region)?;
+    if let Some(offset) = offset {
+        let destination = Aabb {
+            min: region.min + offset,
+            max: region.max + offset,
+        };
+        check_inside("destination", destination)?;
+    }
+    Ok(())
 }
 
 /// Errors unless `region` lies inside the volume box `[-1, 1]^3`.

@@ -1,14 +1,17 @@
 //! The paper's applications on a trained pyramid: editing a scene's finest raw volume
-//! ([`Edit`]: removal, duplicate, move), harmonising the edit by re-running the finer generators
-//! on it ([`SinGrav::harmonize`]), and animation by a smoothed random walk on the finer scales'
-//! noise ([`SinGrav::animation`]).
+//! ([`Edit`]: removal, duplicate, move), composing objects of several scenes into one
+//! ([`Placement`], on a scene or on a scene's [`ground`] alone), harmonising either by re-running
+//! the finer generators on it ([`SinGrav::harmonize`]), and animation by a smoothed random walk
+//! on the finer scales' noise ([`SinGrav::animation`]).
 
 mod animation;
+mod compose;
 mod edit;
 
 use candle_core::Tensor;
 
 pub use animation::{Animation, WalkConfig};
+pub use compose::{ground, Placement, GROUND_WINDOW};
 pub use edit::{empty_voxel, Edit, EMPTY_SIGMA};
 
 use crate::error::{invalid, Result};
