@@ -198,6 +198,12 @@ pub struct Critics {
     /// ground, inside objects); a critic that sees it asks the samples for that fog.
     #[serde(default)]
     pub volume_seen_from_above: bool,
+    /// The 3D critic also sees where each voxel is: the CSG grid's three coordinates (the
+    /// generator's anchors, `csg_embed::csg_grid_3d`) as extra channels, on the fit and on the
+    /// samples alike. A patch critic without them judges a patch wherever it stands, so matter
+    /// of the scene's kind in a place where the scene has none looks real to it.
+    #[serde(default)]
+    pub volume_positions: bool,
 }
 
 /// How raw volumes are activated and rendered.

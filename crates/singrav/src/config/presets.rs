@@ -214,6 +214,7 @@ fn paper() -> TrainConfig {
             volume_colour: false,
             volume_until_scale: None,
             volume_seen_from_above: false,
+            volume_positions: false,
         },
         rendering: Rendering {
             density_scale: 25.0,

@@ -81,6 +81,8 @@ fn raw_density_target(
 pub(super) struct VolumeSight {
     pub colour: bool,
     pub seen_from_above: bool,
+    /// The voxels' positions (the CSG grid) as three more channels.
+    pub positions: bool,
 }
 
 impl VolumeSight {
@@ -88,7 +90,14 @@ impl VolumeSight {
         Self {
             colour: critics.volume_colour,
             seen_from_above: critics.volume_seen_from_above,
+            positions: critics.volume_positions,
         }
+    }
+
+    /// The channels the 3D critic sees: opacity, then with `colour` three of weighted colour,
+    /// then with `positions` three of position.
+    pub fn channels(&self) -> usize {
+        1 + 3 * usize::from(self.colour) + 3 * usize::from(self.positions)
     }
 }
 
@@ -121,10 +130,18 @@ fn sighted(opacity: &Tensor, weighted_rgb: Option<&Tensor>, sight: VolumeSight) 
             None => Ok(t.clone()),
         }
     };
-    match weighted_rgb {
-        Some(rgb) if sight.colour => Ok(Tensor::cat(&[&weigh(opacity)?, &weigh(rgb)?], 1)?),
-        _ => weigh(opacity),
+    let mut channels = vec![weigh(opacity)?];
+    if let (Some(rgb), true) = (weighted_rgb, sight.colour) {
+        channels.push(weigh(rgb)?);
     }
+    if sight.positions {
+        let (batch, _, d, h, w) = opacity.dims5()?;
+        let grid = csg_embed::csg_grid_3d(d, h, w, opacity.device())?
+            .to_dtype(opacity.dtype())?
+            .unsqueeze(0)?;
+        channels.push(grid.broadcast_as((batch, 3, d, h, w))?.contiguous()?);
+    }
+    Ok(Tensor::cat(&channels, 1)?)
 }
 
 /// Per-voxel opacity of a physical density `(.., 1, s, s, s)` across a voxel of edge `voxel`.
@@ -352,19 +369,33 @@ mod tests {
         let same = target.loss(&raw, &activation)?.to_scalar::<f32>()?;
         assert!(same < 1e-10, "{same}");
         // What the 3D critic sees of the fitted volume and of the same raw volume generated.
-        for (colour, seen_from_above, channels) in [
-            (false, false, 1),
-            (true, false, 4),
-            (false, true, 1),
-            (true, true, 4),
+        for (colour, seen_from_above, positions, channels) in [
+            (false, false, false, 1),
+            (true, false, false, 4),
+            (false, true, false, 1),
+            (true, true, false, 4),
+            (false, true, true, 4),
+            (true, true, true, 7),
         ] {
             let sight = VolumeSight {
                 colour,
                 seen_from_above,
+                positions,
             };
+            assert_eq!(sight.channels(), channels);
             let real = target.features(sight)?;
             let generated = target.volume_features(&raw, &activation, sight)?;
             assert_eq!(real.dims(), &[1, channels, 6, 6, 6]);
+            if positions {
+                // The last three channels are the CSG grid: x along W, from -1 + 1/6 up.
+                let x = real
+                    .narrow(1, channels - 3, 1)?
+                    .flatten_all()?
+                    .to_vec1::<f32>()?;
+                let grid = csg_embed::csg_grid_3d(6, 6, 6, &Device::Cpu)?;
+                let want = grid.narrow(0, 0, 1)?.flatten_all()?.to_vec1::<f32>()?;
+                assert_eq!(x, want);
+            }
             let diff = (real - generated)?.abs()?.max_all()?.to_scalar::<f32>()?;
             assert!(diff < 1e-6, "{diff}");
         }

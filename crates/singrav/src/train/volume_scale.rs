@@ -19,7 +19,7 @@ use super::sample_opacity::opacity_binary_loss;
 use super::stage::{Stage, StageParts};
 use crate::config::TrainConfig;
 use crate::error::Result;
-use crate::model::{named_vars, SinGrav, VOLUME_CHANNELS};
+use crate::model::{named_vars, SinGrav};
 use crate::optim::Adam;
 use crate::render::ViewRenderer;
 
@@ -185,14 +185,9 @@ impl<'a> VolumeScale<'a> {
                     "the 3D critic judges against a fitted volume, and none was given",
                 ));
             }
-            let channels = if self.config.critics.volume_colour {
-                VOLUME_CHANNELS
-            } else {
-                1
-            };
             self.volume_critic = Some(VolumeCritic::new(
                 self.config,
-                channels,
+                VolumeSight::of(&self.config.critics).channels(),
                 previous_volume_critic,
                 self.model.device(),
                 rng,
