@@ -1,9 +1,10 @@
 //! Where the stones scene's arrangement is lost, one suspect at a time: trains the first SCALES
 //! scales of `tiny` (with `--set` changes) at several seeds, then scores random volumes of the
 //! last trained scale against the scene baked at that size: the layout distance, the layout
-//! distance between samples (their spread of arrangements), and the stones-only share of grey
-//! matter inside the ring; the other true layouts of the scene are the reference row. Used
-//! for docs/journal/2026-12-arrangement.md.
+//! distance between samples (their spread of arrangements), the stones-only share of grey
+//! matter inside the ring, and the share of all matter out of place (`misplaced_matter`, seen
+//! from above against the baked scene, as `volgen eval` takes it against a fit); the other true
+//! layouts of the scene are the reference row. Used for docs/journal/2026-12-arrangement.md.
 //!
 //! `cargo run --release -p research --example coarse_layout -- DATASET OUT SCALES SEEDS
 //! [path=value ...]` (SEEDS: comma-separated training seeds; OUT gets a run per seed).
@@ -16,7 +17,10 @@ use rand::SeedableRng;
 use research::stone_shares;
 use rgbd_dataset::scenes::{Scene, StandingStones};
 use rgbd_dataset::{Dataset, LoadOptions};
-use scene_metrics::{layout_distance, LayoutPoints, LAYOUT_DIRECTIONS};
+use scene_metrics::{
+    layout_distance, LayoutPoints, LayoutWeighting, MatterKinds, MatterSupport, LAYOUT_DIRECTIONS,
+    MISPLACED_KINDS, MISPLACED_REACH,
+};
 use singrav::train::{Control, RunOptions, Trainer};
 use singrav::{SinGrav, TrainConfig};
 
@@ -29,12 +33,24 @@ fn points(volume: &RadianceVolume) -> LayoutPoints {
     LayoutPoints::from_volume(volume.tensor(), voxel).unwrap()
 }
 
+/// A volume's matter as `volgen eval` weighs it for the layout and `misplaced_matter`.
+fn seen_points(volume: &RadianceVolume) -> LayoutPoints {
+    let voxel = 2.0 / volume.dims().xyz()[0] as f32;
+    LayoutPoints::from_volume_weighted(volume.tensor(), voxel, LayoutWeighting::SeenFromAbove)
+        .unwrap()
+}
+
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
 }
 
-/// (layout distance to the scene, pairwise layout distance, share inside the ring) of `volumes`.
-fn scores(reference: &LayoutPoints, volumes: &[RadianceVolume]) -> (f64, f64, f64) {
+/// (layout distance to the scene, pairwise layout distance, share inside the ring, share out of
+/// place) of `volumes`.
+fn scores(
+    reference: &LayoutPoints,
+    support: &MatterSupport,
+    volumes: &[RadianceVolume],
+) -> (f64, f64, f64, f64) {
     let clouds: Vec<LayoutPoints> = volumes.iter().map(points).collect();
     let distance =
         |a: &LayoutPoints, b: &LayoutPoints| layout_distance(a, b, LAYOUT_DIRECTIONS, 0).unwrap();
@@ -47,7 +63,16 @@ fn scores(reference: &LayoutPoints, volumes: &[RadianceVolume]) -> (f64, f64, f6
         }
     }
     let inside: Vec<f64> = volumes.iter().map(|v| stone_shares(v).0).collect();
-    (mean(&to_scene), mean(&pairs), mean(&inside))
+    let misplaced: Vec<f64> = volumes
+        .iter()
+        .map(|v| support.misplaced(&seen_points(v)))
+        .collect();
+    (
+        mean(&to_scene),
+        mean(&pairs),
+        mean(&inside),
+        mean(&misplaced),
+    )
 }
 
 fn main() {
@@ -69,17 +94,22 @@ fn main() {
     let dataset = Dataset::load_with(Path::new(dataset), &options).unwrap();
     let size = base.pyramid.volume_sizes[scales - 1];
     let dims = GridDims::cube(size);
-    let reference = points(&StandingStones::new(0).to_volume(dims).unwrap());
+    let scene = StandingStones::new(0).to_volume(dims).unwrap();
+    let reference = points(&scene);
+    let seen = seen_points(&scene);
+    let kinds = MatterKinds::of(&seen, MISPLACED_KINDS, 0).unwrap();
+    let support = MatterSupport::of(&seen, kinds, MISPLACED_REACH).unwrap();
     let family: Vec<RadianceVolume> = (1..=SCENES as u64)
         .map(|seed| StandingStones::new(seed).to_volume(dims).unwrap())
         .collect();
-    let (d, spread, inside) = scores(&reference, &family);
+    let (d, spread, inside, misplaced) = scores(&reference, &support, &family);
     println!("settings: {settings:?}, scales {scales} ({size}^3)");
-    println!("| run | to the scene | between samples | inside the ring | V* to the scene | to V* | seconds |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| run | to the scene | between samples | inside the ring | out of place | V* to the scene | to V* | seconds |");
+    println!("|---|---|---|---|---|---|---|---|");
     println!(
-        "| true layouts | {d:.4} | {spread:.4} | {:.1}% | | | |",
-        100.0 * inside
+        "| true layouts | {d:.4} | {spread:.4} | {:.1}% | {:.2}% | | | |",
+        100.0 * inside,
+        100.0 * misplaced
     );
     let mut rows = Vec::new();
     for seed in seeds.split(',') {
@@ -109,24 +139,27 @@ fn main() {
             })
             .collect();
         let v_star = model.to_physical(&model.reconstruct().unwrap()).unwrap();
-        let (d, spread, inside) = scores(&reference, &volumes);
-        let (v, _, v_inside) = scores(&reference, std::slice::from_ref(&v_star));
-        let (to_v, _, _) = scores(&points(&v_star), &volumes);
+        let (d, spread, inside, misplaced) = scores(&reference, &support, &volumes);
+        let (v, _, v_inside, v_out) = scores(&reference, &support, std::slice::from_ref(&v_star));
+        let (to_v, ..) = scores(&points(&v_star), &support, &volumes);
         println!(
-            "| seed {seed} | {d:.4} | {spread:.4} | {:.1}% | {v:.4} ({:.1}% inside) | {to_v:.4} | {seconds:.0} |",
+            "| seed {seed} | {d:.4} | {spread:.4} | {:.1}% | {:.2}% | {v:.4} ({:.1}% inside, {:.2}% out of place) | {to_v:.4} | {seconds:.0} |",
             100.0 * inside,
-            100.0 * v_inside
+            100.0 * misplaced,
+            100.0 * v_inside,
+            100.0 * v_out
         );
-        rows.push((d, spread, inside, v, to_v));
+        rows.push((d, spread, inside, misplaced, v, to_v));
     }
-    let column =
-        |f: fn(&(f64, f64, f64, f64, f64)) -> f64| mean(&rows.iter().map(f).collect::<Vec<_>>());
+    type Row = (f64, f64, f64, f64, f64, f64);
+    let column = |f: fn(&Row) -> f64| mean(&rows.iter().map(f).collect::<Vec<_>>());
     println!(
-        "| mean | {:.4} | {:.4} | {:.1}% | {:.4} | {:.4} | |",
+        "| mean | {:.4} | {:.4} | {:.1}% | {:.2}% | {:.4} | {:.4} | |",
         column(|r| r.0),
         column(|r| r.1),
         100.0 * column(|r| r.2),
-        column(|r| r.3),
-        column(|r| r.4)
+        100.0 * column(|r| r.3),
+        column(|r| r.4),
+        column(|r| r.5)
     );
 }

@@ -15,7 +15,6 @@ use glam::Vec3;
 use radiance_volume::Aabb;
 use rand::SeedableRng;
 use singrav::applications::{empty_voxel, ground, Placement};
-use singrav::sample::showcase_cameras;
 use singrav::SinGrav;
 
 use super::harmonize::{harmonize_and_write, HarmonizeArgs};
@@ -124,13 +123,7 @@ pub fn run(args: &ComposeArgs) -> Result<()> {
         bounds: model.config().run.bounds.as_ref(),
     })?;
     let harmonize_from = args.harmonize.start_scale(&model)?;
-    let cameras = showcase_cameras(args.views, model.render_size())?;
-    let writer = SceneWriter {
-        model: &model,
-        cameras,
-        dir: &args.out,
-        outputs: args.outputs,
-    };
+    let writer = SceneWriter::new(&model, args.views, &args.out, args.outputs)?;
 
     let started = Instant::now();
     let (base, what) = match args.base {

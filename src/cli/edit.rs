@@ -12,7 +12,6 @@ use glam::Vec3;
 use radiance_volume::Aabb;
 use rand::SeedableRng;
 use singrav::applications::{empty_voxel, Edit};
-use singrav::sample::showcase_cameras;
 
 use super::harmonize::{harmonize_and_write, HarmonizeArgs};
 use super::model_io::{load_model, Outputs, SceneWriter};
@@ -133,13 +132,7 @@ pub fn run(args: &EditArgs) -> Result<()> {
         bounds: model.config().run.bounds.as_ref(),
     })?;
     let harmonize_from = args.harmonize.start_scale(&model)?;
-    let cameras = showcase_cameras(args.views, model.render_size())?;
-    let writer = SceneWriter {
-        model: &model,
-        cameras,
-        dir: &args.out,
-        outputs: args.outputs,
-    };
+    let writer = SceneWriter::new(&model, args.views, &args.out, args.outputs)?;
 
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let started = Instant::now();

@@ -132,7 +132,17 @@ pub struct SceneWriter<'a> {
     pub outputs: Outputs,
 }
 
-impl SceneWriter<'_> {
+impl<'a> SceneWriter<'a> {
+    /// A writer of `model`'s scenes into `dir`, rendered from `views` showcase cameras.
+    pub fn new(model: &'a SinGrav, views: usize, dir: &'a Path, outputs: Outputs) -> Result<Self> {
+        Ok(Self {
+            model,
+            cameras: singrav::sample::showcase_cameras(views, model.render_size())?,
+            dir,
+            outputs,
+        })
+    }
+
     /// Writes `raw` as `stem` ([`write_scene`]) and prints `stem: what -> files`.
     pub fn write(&self, stem: &str, raw: &Tensor, what: String) -> Result<()> {
         let volume = self.outputs.volume(self.model, raw)?;

@@ -1,10 +1,11 @@
-"""Render an imported volgen volume with Cycles from a dataset's camera and check that it is
-non-empty where the scene was (the round trip's last step; see round_trip.sh).
+"""Render an imported volgen volume or mesh with Cycles from a dataset's camera and check that
+it is non-empty where the scene was (the round trip's last step; see round_trip.sh).
 
     python tools/blender/check_round_trip.py with_volume.blend DATASET --view 0 --picture out.png
 
-Only Volume objects are rendered (the scene's meshes are hidden). The check compares the
-render's opacity with the dataset image's: the volume must cover the scene's pixels (mean
+Only what volgen made is rendered: Volume objects (import_volume.py) and meshes import_mesh.py
+marked `volgen_import`; the scene's own meshes are hidden. The check compares the render's
+opacity with the dataset image's: the import must cover the scene's pixels (mean
 opacity over pixels with dataset alpha > 0.5 at least --min-inside) and be clearly fainter
 elsewhere (mean opacity over pixels with alpha < 0.05 below the inside mean by at least
 --min-contrast). --picture writes the dataset view and the volume's render side by side on grey.
@@ -14,15 +15,16 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 
 import bpy
-from mathutils import Matrix
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from dataset_view import render_frame, set_up_cycles  # noqa: E402
 
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("blend", help="the .blend holding the imported volume")
+    parser.add_argument("blend", help="the .blend holding the imported volume or mesh")
     parser.add_argument("dataset", help="the dataset directory the scene was exported to")
     parser.add_argument("--view", type=int, default=0, help="the dataset frame to render (default 0)")
     parser.add_argument("--samples", type=int, default=32, help="Cycles samples (default 32)")
@@ -44,39 +46,20 @@ def main():
     args = parse_args(sys.argv)
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene
-    volumes = [o for o in scene.objects if o.type == "VOLUME"]
-    if not volumes:
-        sys.exit(f"error: {args.blend} has no Volume object")
+    imported = [o for o in scene.objects if o.type == "VOLUME" or o.get("volgen_import")]
+    if not imported:
+        sys.exit(f"error: {args.blend} has no Volume object and no mesh import_mesh.py imported")
     for obj in scene.objects:
-        if obj.type == "MESH":
+        if obj.type == "MESH" and not obj.get("volgen_import"):
             obj.hide_render = True
 
     with open(os.path.join(args.dataset, "transforms.json")) as f:
         transforms = json.load(f)
     frame = transforms["frames"][args.view]
-    data = bpy.data.cameras.new("check")
-    data.sensor_fit = "HORIZONTAL"
-    data.angle_x = transforms["camera_angle_x"]
-    camera = bpy.data.objects.new("check", data)
-    scene.collection.objects.link(camera)
-    camera.matrix_world = Matrix(frame["transform_matrix"])
-    scene.camera = camera
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = args.samples
-    scene.render.resolution_x = transforms["w"]
-    scene.render.resolution_y = transforms["h"]
-    scene.render.resolution_percentage = 100
-    scene.render.film_transparent = True
-    scene.view_settings.view_transform = "Standard"
-    settings = scene.render.image_settings
-    settings.media_type = "IMAGE"
-    settings.file_format = "PNG"
-    settings.color_mode = "RGBA"
-    bpy.ops.render.render()
-    rendered_path = os.path.join(tempfile.mkdtemp(), "volume.png")
-    bpy.data.images["Render Result"].save_render(filepath=rendered_path, scene=scene)
+    set_up_cycles(scene, transforms, args.samples)
+    rendered_path = render_frame(scene, transforms, frame)
 
+    kind = "volume" if any(o.type == "VOLUME" for o in imported) else "mesh"
     w, h, truth = rgba(os.path.join(args.dataset, frame["file_path"]))
     _, _, render = rgba(rendered_path)
     inside = [r[3] for t, r in zip(truth, render) if t[3] > 0.5]
@@ -84,7 +67,7 @@ def main():
     mean = lambda xs: sum(xs) / max(len(xs), 1)
     inside_mean, outside_mean = mean(inside), mean(outside)
     print(
-        f"volume opacity: {inside_mean:.3f} mean over the scene's {len(inside)} pixels, "
+        f"{kind} opacity: {inside_mean:.3f} mean over the scene's {len(inside)} pixels, "
         f"{outside_mean:.3f} over the {len(outside)} empty ones"
     )
 
@@ -105,10 +88,10 @@ def main():
 
     if inside_mean < args.min_inside or inside_mean - outside_mean < args.min_contrast:
         sys.exit(
-            f"error: the imported volume is not where the scene was (need opacity >= "
+            f"error: the imported {kind} is not where the scene was (need opacity >= "
             f"{args.min_inside} over the scene and {args.min_contrast} more than elsewhere)"
         )
-    print("round trip ok: the volume is where the scene was")
+    print(f"round trip ok: the {kind} is where the scene was")
 
 
 if __name__ == "__main__":

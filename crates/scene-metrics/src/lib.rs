@@ -39,6 +39,8 @@ mod patch_swd;
 mod psnr;
 mod sifid;
 mod ssim;
+#[cfg(test)]
+mod test_slabs;
 
 pub use colour_swd::{colour_swd, colour_swd_per_scene};
 pub use depth::depth_rmse;

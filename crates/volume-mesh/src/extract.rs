@@ -9,9 +9,12 @@ use radiance_volume::RadianceVolume;
 use crate::error::{invalid, Error, Result};
 use crate::mesh::Mesh;
 
-/// The opacity level [`MeshOptions::default`] takes: the surface where a voxel stops half of the
-/// light crossing it, halfway between empty space and solid matter.
-pub const DEFAULT_LEVEL: f32 = 0.5;
+/// The opacity level [`MeshOptions::default`] takes: the surface where a voxel stops a quarter
+/// of the light crossing it. Chosen by measurement (docs/formats.md, "Meshes"): rendered from a
+/// dataset's cameras, meshes at 0.25 match the volume's own rendering 2.9-4.6 dB better in colour
+/// than at 0.5, whose surface leaves out the soft edges a camera sees, and keep the colours of
+/// denser matter better than at 0.1, whose surface lies in faint fog.
+pub const DEFAULT_LEVEL: f32 = 0.25;
 
 /// How [`Mesh::from_volume`] makes a mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -4,14 +4,15 @@
 use std::f64::consts::PI;
 
 use radiance_volume::{Aabb, GridDims, RadianceVolume};
-use volume_mesh::{srgb_to_linear, Error, Mesh, MeshOptions};
+use volume_mesh::{srgb_to_linear, Error, Mesh, MeshOptions, DEFAULT_LEVEL};
 
 /// Grid edge of the test volumes.
 const N: usize = 48;
 
-/// A volume over `aabb` whose opacity across a voxel falls linearly from 1 to 0 over one voxel
-/// across the surface `distance(p) = 0` (negative inside), so the 0.5 level lies on it; colour
-/// from `colour(p)`.
+/// A volume over `aabb` whose opacity across a voxel falls linearly from twice the default
+/// level to 0 over two voxels across the surface `distance(p) = 0` (negative inside), so the
+/// default level lies on it and both voxel centres of every edge the surface crosses are on
+/// the linear ramp; colour from `colour(p)`.
 fn smooth(
     aabb: Aabb,
     distance: impl Fn(glam::Vec3) -> f32 + Sync,
@@ -19,7 +20,7 @@ fn smooth(
 ) -> RadianceVolume {
     let voxel = (aabb.max - aabb.min).x / N as f32;
     RadianceVolume::from_fn(GridDims::cube(N), aabb, 4, |p, out| {
-        let opacity = (0.5 - distance(p) / voxel).clamp(0.0, 0.999);
+        let opacity = (DEFAULT_LEVEL * (1.0 - distance(p) / voxel)).clamp(0.0, 0.999);
         out[0] = -(1.0 - opacity).ln() / voxel;
         out[1..4].copy_from_slice(&colour(p));
     })
@@ -272,7 +273,7 @@ fn bad_arguments_and_empty_volumes_are_refused_by_name() {
 
 #[test]
 fn a_lower_level_takes_in_thinner_matter() {
-    // Fog of opacity 0.3 per voxel round a dense core: the default level sees the core only.
+    // Fog of opacity 0.3 per voxel round a dense core: a level above the fog sees the core only.
     let voxel = 2.0 / N as f32;
     let fog = RadianceVolume::from_fn(GridDims::cube(N), Aabb::CUBE, 4, |p, out| {
         let opacity: f32 = if p.length() < 0.3 {
@@ -286,7 +287,7 @@ fn a_lower_level_takes_in_thinner_matter() {
         out[1..4].fill(0.5);
     })
     .unwrap();
-    let core = Mesh::from_volume(&fog, &MeshOptions::default()).unwrap();
+    let core = Mesh::from_volume(&fog, &MeshOptions { level: 0.5 }).unwrap();
     let cloud = Mesh::from_volume(&fog, &MeshOptions { level: 0.2 }).unwrap();
     let volume = |r: f64| 4.0 / 3.0 * PI * r.powi(3);
     assert!((core.enclosed_volume() / volume(0.3) - 1.0).abs() < 0.1);
