@@ -14,12 +14,12 @@ use std::path::Path;
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
-use research::stone_shares;
+use research::{seen_points, stone_shares};
 use rgbd_dataset::scenes::{Scene, StandingStones};
 use rgbd_dataset::{Dataset, LoadOptions};
 use scene_metrics::{
-    layout_distance, LayoutPoints, LayoutWeighting, MatterKinds, MatterSupport, LAYOUT_DIRECTIONS,
-    MISPLACED_KINDS, MISPLACED_REACH,
+    layout_distance, LayoutPoints, MatterKinds, MatterSupport, LAYOUT_DIRECTIONS, MISPLACED_KINDS,
+    MISPLACED_REACH,
 };
 use singrav::train::{Control, RunOptions, Trainer};
 use singrav::{SinGrav, TrainConfig};
@@ -31,13 +31,6 @@ const SPREAD_SCENES: usize = 12;
 fn points(volume: &RadianceVolume) -> LayoutPoints {
     let voxel = 2.0 / volume.dims().xyz()[0] as f32;
     LayoutPoints::from_volume(volume.tensor(), voxel).unwrap()
-}
-
-/// A volume's matter as `volgen eval` weighs it for the layout and `misplaced_matter`.
-fn seen_points(volume: &RadianceVolume) -> LayoutPoints {
-    let voxel = 2.0 / volume.dims().xyz()[0] as f32;
-    LayoutPoints::from_volume_weighted(volume.tensor(), voxel, LayoutWeighting::SeenFromAbove)
-        .unwrap()
 }
 
 fn mean(values: &[f64]) -> f64 {

@@ -13,9 +13,9 @@
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
-use research::{mean_and_sd, stone_shares};
+use research::{mean_and_sd, misplaced_by_band, seen_points, stone_shares};
 use rgbd_dataset::Dataset;
-use scene_metrics::{LayoutPoints, LayoutWeighting, MatterKinds, MatterSupport};
+use scene_metrics::{MatterKinds, MatterSupport};
 use singrav::SinGrav;
 
 /// Numbers of kinds compared.
@@ -24,12 +24,6 @@ const KINDS: [usize; 3] = [2, 3, 4];
 const REACHES: [f64; 4] = [0.125, 0.1875, 0.25, 0.375];
 const LAYOUTS: usize = 32;
 const SCENES: usize = 32;
-
-fn points(volume: &RadianceVolume) -> LayoutPoints {
-    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
-    LayoutPoints::from_volume_weighted(volume.tensor(), voxel, LayoutWeighting::SeenFromAbove)
-        .unwrap()
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -45,7 +39,7 @@ fn main() {
     let fit = singrav::train::fit_training_target(first.config(), &data, None, &mut |_| {})
         .unwrap()
         .volume;
-    let reference = points(&fit);
+    let reference = seen_points(&fit);
     // (kinds, reach) settings in column order.
     let settings: Vec<(usize, f64, MatterSupport)> = KINDS
         .iter()
@@ -67,29 +61,16 @@ fn main() {
         })
         .collect();
     let stones = source.kind.name() == "stones";
-    // Where the matter out of place stands (2 kinds, reach 0.25): its share of all matter in
-    // columns inside the ring (r < 0.4), on it (0.4 <= r < 0.8) and beyond it (r >= 0.8).
+    // Where the matter out of place stands (2 kinds, reach 0.25).
     let chosen = &settings
         .iter()
         .find(|(k, reach, _)| *k == 2 && *reach == 0.25)
         .unwrap()
         .2;
-    let bands = |volume: &RadianceVolume| -> [f64; 3] {
-        let total = seen_weight(volume);
-        [(0.0, 0.4), (0.4, 0.8), (0.8, 9.0)].map(|(from, to)| {
-            let band = columns_between(volume, from, to);
-            let weight = seen_weight(&band);
-            if weight > 0.0 {
-                chosen.misplaced(&points(&band)) * weight / total
-            } else {
-                0.0
-            }
-        })
-    };
     // Per volume, per setting: (all matter's share out of place, mean over kinds of each
     // kind's share); then the stones' share inside the ring.
     let score = |volume: &RadianceVolume| {
-        let own = points(volume);
+        let own = seen_points(volume);
         let mut row: Vec<f64> = settings
             .iter()
             .flat_map(|(_, _, support)| {
@@ -101,7 +82,7 @@ fn main() {
             })
             .collect();
         row.push(if stones { stone_shares(volume).0 } else { 0.0 });
-        row.extend(bands(volume));
+        row.extend(misplaced_by_band(chosen, volume));
         row
     };
     let grid = *first.config().pyramid.volume_sizes.last().unwrap();
@@ -156,51 +137,4 @@ fn main() {
             .collect();
         println!("| {name} | {} | {} |", rows.len(), cells.join(" | "));
     }
-}
-
-/// The total seen-from-above weight (opacity times the transmittance above) of a volume's
-/// voxels, before `LayoutPoints` normalises it.
-fn seen_weight(volume: &RadianceVolume) -> f64 {
-    let [w, h, d] = volume.dims().xyz();
-    let voxel = f64::from(volume.aabb().size().x) / w as f64;
-    let sigma: Vec<f32> = volume
-        .tensor()
-        .get(0)
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .to_vec1()
-        .unwrap();
-    let mut total = 0.0;
-    for column in 0..h * w {
-        let mut above = 1.0;
-        for z in (0..d).rev() {
-            let opacity = 1.0 - (-f64::from(sigma[z * h * w + column]) * voxel).exp();
-            total += opacity * above;
-            above *= 1.0 - opacity;
-        }
-    }
-    total
-}
-
-/// `volume` with the density of every column whose axis lies outside `from <= r < to` (r the
-/// distance from the box's vertical axis, normalised box) set to 0: whole columns, so the
-/// weights seen from above of the columns kept are unchanged.
-fn columns_between(volume: &RadianceVolume, from: f64, to: f64) -> RadianceVolume {
-    let [w, h, d] = volume.dims().xyz();
-    let mut values: Vec<f32> = volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
-    let centre = |i: usize, n: usize| 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
-    for z in 0..d {
-        for y in 0..h {
-            for x in 0..w {
-                let r = centre(x, w).hypot(centre(y, h));
-                if !(from..to).contains(&r) {
-                    values[(z * h + y) * w + x] = 0.0;
-                }
-            }
-        }
-    }
-    let tensor =
-        candle_core::Tensor::from_vec(values, volume.tensor().dims(), &Device::Cpu).unwrap();
-    volume.with_tensor(tensor).unwrap()
 }

@@ -44,3 +44,86 @@ pub fn mean_and_sd(values: &[f64]) -> (f64, f64) {
     let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64;
     (mean, var.sqrt())
 }
+
+/// A volume's matter as `volgen eval` weighs it for the layout distance and
+/// `misplaced_matter`: each voxel's opacity times the transmittance above it.
+pub fn seen_points(volume: &radiance_volume::RadianceVolume) -> scene_metrics::LayoutPoints {
+    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
+    scene_metrics::LayoutPoints::from_volume_weighted(
+        volume.tensor(),
+        voxel,
+        scene_metrics::LayoutWeighting::SeenFromAbove,
+    )
+    .unwrap()
+}
+
+/// Where a volume's matter out of place stands: its share of all the volume's matter in the
+/// columns inside the stones' ring (r < 0.4, r the distance from the box's vertical axis,
+/// normalised box), on it (0.4 <= r < 0.8) and beyond it (r >= 0.8).
+pub fn misplaced_by_band(
+    support: &scene_metrics::MatterSupport,
+    volume: &radiance_volume::RadianceVolume,
+) -> [f64; 3] {
+    let total = seen_weight(volume);
+    [(0.0, 0.4), (0.4, 0.8), (0.8, 9.0)].map(|(from, to)| {
+        let band = columns_between(volume, from, to);
+        let weight = seen_weight(&band);
+        if weight > 0.0 {
+            support.misplaced(&seen_points(&band)) * weight / total
+        } else {
+            0.0
+        }
+    })
+}
+
+/// The total seen-from-above weight (opacity times the transmittance above) of a volume's
+/// voxels, before `LayoutPoints` normalises it.
+fn seen_weight(volume: &radiance_volume::RadianceVolume) -> f64 {
+    let [w, h, d] = volume.dims().xyz();
+    let voxel = f64::from(volume.aabb().size().x) / w as f64;
+    let sigma: Vec<f32> = volume
+        .tensor()
+        .get(0)
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let mut total = 0.0;
+    for column in 0..h * w {
+        let mut above = 1.0;
+        for z in (0..d).rev() {
+            let opacity = 1.0 - (-f64::from(sigma[z * h * w + column]) * voxel).exp();
+            total += opacity * above;
+            above *= 1.0 - opacity;
+        }
+    }
+    total
+}
+
+/// `volume` with the density of every column whose axis lies outside `from <= r < to` (r the
+/// distance from the box's vertical axis, normalised box) set to 0: whole columns, so the
+/// weights seen from above of the columns kept are unchanged.
+fn columns_between(
+    volume: &radiance_volume::RadianceVolume,
+    from: f64,
+    to: f64,
+) -> radiance_volume::RadianceVolume {
+    let [w, h, d] = volume.dims().xyz();
+    let mut values: Vec<f32> = volume.tensor().flatten_all().unwrap().to_vec1().unwrap();
+    let centre = |i: usize, n: usize| 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
+    for z in 0..d {
+        for y in 0..h {
+            for x in 0..w {
+                let r = centre(x, w).hypot(centre(y, h));
+                if !(from..to).contains(&r) {
+                    values[(z * h + y) * w + x] = 0.0;
+                }
+            }
+        }
+    }
+    let tensor =
+        candle_core::Tensor::from_vec(values, volume.tensor().dims(), &candle_core::Device::Cpu)
+            .unwrap();
+    volume.with_tensor(tensor).unwrap()
+}

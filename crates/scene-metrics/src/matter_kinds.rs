@@ -250,8 +250,8 @@ fn plus_plus_centres(
 #[cfg(test)]
 mod tests {
     use super::{kind_layout_distance, MatterKinds};
-    use crate::test_slabs::slab;
     use crate::layout_distance;
+    use crate::test_slabs::slab;
 
     const GROUND: [f32; 3] = [0.2, 0.6, 0.2];
     const STONE: [f32; 3] = [0.55, 0.55, 0.55];
