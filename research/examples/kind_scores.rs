@@ -12,7 +12,7 @@
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
-use research::{mean_and_sd, stone_shares};
+use research::{fit_of_views, mean_and_sd, stone_shares};
 use rgbd_dataset::Dataset;
 use scene_metrics::{
     kind_layout_distance, kind_layout_distances, layout_distance, LayoutPoints, LayoutWeighting,
@@ -40,9 +40,7 @@ fn main() {
     let source = data
         .scene_source()
         .expect("a dataset of a built-in scene (volgen scene)");
-    let fit = singrav::train::fit_training_target(model.config(), &data, None, &mut |_| {})
-        .unwrap()
-        .volume;
+    let fit = fit_of_views(model.config(), &data);
     let reference = points(&fit);
     let kinds: Vec<MatterKinds> = KINDS
         .iter()

@@ -13,7 +13,7 @@
 use candle_core::Device;
 use radiance_volume::GridDims;
 use rand::SeedableRng;
-use research::{mean_and_sd, stone_shares};
+use research::{fit_of_views, mean_and_sd, stone_shares};
 use rgbd_dataset::scenes::{Scene, StandingStones};
 use rgbd_dataset::Dataset;
 use scene_metrics::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
@@ -65,9 +65,7 @@ fn main() {
     let dims = GridDims::cube(grid);
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
-    let fit = singrav::train::fit_training_target(model.config(), &data, None, &mut |_| {})
-        .unwrap()
-        .volume;
+    let fit = fit_of_views(model.config(), &data);
     let scene = StandingStones::new(0).to_volume(dims).unwrap();
     // (reference, weighting) pairs in column order, then the fit seen from above by position
     // alone (every colour set to 0).

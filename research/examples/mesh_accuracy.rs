@@ -54,30 +54,8 @@ fn rasterise(mesh: &Mesh, camera: &Camera) -> Raster {
         if area.abs() < 1e-12 {
             continue;
         }
-        let min_col = c
-            .iter()
-            .map(|v| v.0)
-            .fold(f32::INFINITY, f32::min)
-            .floor()
-            .max(0.0) as usize;
-        let max_col = (c
-            .iter()
-            .map(|v| v.0)
-            .fold(f32::NEG_INFINITY, f32::max)
-            .ceil() as usize)
-            .min(w);
-        let min_row = c
-            .iter()
-            .map(|v| v.1)
-            .fold(f32::INFINITY, f32::min)
-            .floor()
-            .max(0.0) as usize;
-        let max_row = (c
-            .iter()
-            .map(|v| v.1)
-            .fold(f32::NEG_INFINITY, f32::max)
-            .ceil() as usize)
-            .min(h);
+        let (min_col, max_col) = pixel_span(c.iter().map(|v| v.0), w);
+        let (min_row, max_row) = pixel_span(c.iter().map(|v| v.1), h);
         for row in min_row..max_row {
             for col in min_col..max_col {
                 let (x, y) = (col as f32 + 0.5, row as f32 + 0.5);
@@ -103,6 +81,17 @@ fn rasterise(mesh: &Mesh, camera: &Camera) -> Raster {
         }
     }
     Raster { rgb, covered }
+}
+
+/// The pixels `0..limit` whose centres a triangle with these screen coordinates (along one
+/// axis) may cover: from the floor of the least to the ceiling of the greatest.
+fn pixel_span(coordinates: impl Iterator<Item = f32> + Clone, limit: usize) -> (usize, usize) {
+    let low = coordinates.clone().fold(f32::INFINITY, f32::min);
+    let high = coordinates.fold(f32::NEG_INFINITY, f32::max);
+    (
+        low.floor().max(0.0) as usize,
+        (high.ceil() as usize).min(limit),
+    )
 }
 
 fn main() {

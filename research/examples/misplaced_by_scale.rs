@@ -9,7 +9,7 @@
 
 use candle_core::Device;
 use rand::SeedableRng;
-use research::{mean_and_sd, misplaced_by_band, seen_points};
+use research::{fit_of_views, mean_and_sd, misplaced_by_band, seen_points};
 use rgbd_dataset::Dataset;
 use scene_metrics::{MatterKinds, MatterSupport, MISPLACED_KINDS, MISPLACED_REACH};
 use singrav::SinGrav;
@@ -23,9 +23,7 @@ fn main() {
     };
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
-    let fit = singrav::train::fit_training_target(model.config(), &data, None, &mut |_| {})
-        .unwrap()
-        .volume;
+    let fit = fit_of_views(model.config(), &data);
     let reference = seen_points(&fit);
     let kinds = MatterKinds::of(&reference, MISPLACED_KINDS, 0).unwrap();
     let support = MatterSupport::of(&reference, kinds, MISPLACED_REACH).unwrap();

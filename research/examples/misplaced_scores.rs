@@ -13,7 +13,7 @@
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
-use research::{mean_and_sd, misplaced_by_band, seen_points, stone_shares};
+use research::{fit_of_views, mean_and_sd, misplaced_by_band, seen_points, stone_shares};
 use rgbd_dataset::Dataset;
 use scene_metrics::{MatterKinds, MatterSupport};
 use singrav::SinGrav;
@@ -36,9 +36,7 @@ fn main() {
     let source = data
         .scene_source()
         .expect("a dataset of a built-in scene (volgen scene)");
-    let fit = singrav::train::fit_training_target(first.config(), &data, None, &mut |_| {})
-        .unwrap()
-        .volume;
+    let fit = fit_of_views(first.config(), &data);
     let reference = seen_points(&fit);
     // (kinds, reach) settings in column order.
     let settings: Vec<(usize, f64, MatterSupport)> = KINDS

@@ -127,3 +127,14 @@ fn columns_between(
             .unwrap();
     volume.with_tensor(tensor).unwrap()
 }
+
+/// The reference `volgen eval` scores layouts against: a direct fit of the dataset's views,
+/// made as training makes the 3D critic's, with the run's configuration.
+pub fn fit_of_views(
+    config: &singrav::TrainConfig,
+    data: &rgbd_dataset::Dataset,
+) -> radiance_volume::RadianceVolume {
+    singrav::train::fit_training_target(config, data, None, &mut |_| {})
+        .unwrap()
+        .volume
+}
