@@ -931,3 +931,101 @@ fn animate_gif_holds_every_frame_as_its_png_shows_it() {
         assert!(mean < 4.0, "frame {t}: mean difference {mean} levels");
     }
 }
+
+/// `--extent`: `sample` writes scenes over the grown box (volume, VDB read back by vdb-rs,
+/// views at the learned pixel size), `edit` takes boxes beyond the learned cube, `animate`
+/// grows its frames, and every refusal names its flag.
+#[test]
+fn extent_grows_samples_edits_and_animations_and_names_bad_flags() {
+    let model = trained_micro();
+    let tmp = tempfile::tempdir().unwrap();
+    let (learned, wide) = (tmp.path().join("learned"), tmp.path().join("wide"));
+    let sample = |dir: &Path, extra: &[&str]| {
+        let mut args = vec!["sample", path(model), "--count", "1", "--upsample", "1"];
+        args.extend_from_slice(&["--vdb", "--out", path(dir)]);
+        args.extend_from_slice(extra);
+        ok(&volgen(&args))
+    };
+    sample(&learned, &[]);
+    sample(&wide, &["--extent", "2,1,1", "--csg-outside", "clamp"]);
+    let small = RadianceVolume::load_safetensors(learned.join("scene_0.safetensors")).unwrap();
+    let grown = RadianceVolume::load_safetensors(wide.join("scene_0.safetensors")).unwrap();
+    let (s, g) = (small.dims(), grown.dims());
+    assert_eq!((g.d, g.h, g.w), (s.d, s.h, 2 * s.w));
+    assert_eq!(grown.aabb().min, glam::Vec3::new(-2.0, -1.0, -1.0));
+    assert_eq!(grown.aabb().max, glam::Vec3::new(2.0, 1.0, 1.0));
+    common::assert_vdb_matches(&grown, &wide.join("scene_0.vdb"));
+    // Three views twice the learned size (micro: 36 after the upsampler), 2-pixel borders.
+    let png = image::open(wide.join("scene_0.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (3 * 72 + 4 * 2, 72 + 2 * 2));
+
+    // A box beyond the learned cube: refused at the learned size, emptied at 2,1,1.
+    let beyond = "1.2,-0.5,-1,1.8,0.5,0.2";
+    let edit = |dir: &Path, extra: &[&str]| {
+        let mut args = vec!["edit", path(model), "--remove", beyond, "--no-harmonize"];
+        args.extend_from_slice(&["--upsample", "1", "--out", path(dir)]);
+        args.extend_from_slice(extra);
+        volgen(&args)
+    };
+    let err = failure(&edit(&tmp.path().join("refused"), &[]));
+    assert!(err.contains("[-1, 1]^3"), "{err}");
+    let edited_dir = tmp.path().join("edited");
+    ok(&edit(&edited_dir, &["--extent", "2,1,1"]));
+    let edited = RadianceVolume::load_safetensors(edited_dir.join("edited.safetensors")).unwrap();
+    assert_eq!(edited.dims(), grown.dims());
+    let density = volume_values(&edited_dir.join("edited.safetensors"));
+    let (grid, dims) = (*edited.grid(), edited.dims());
+    let mut inside = 0;
+    for z in 0..dims.d {
+        for y in 0..dims.h {
+            for x in 0..dims.w {
+                let p = grid.cell_center(z, y, x);
+                if p.x > 1.2 && p.x < 1.8 && p.y.abs() < 0.5 && p.z < 0.2 {
+                    inside += 1;
+                    assert!(density[dims.index(z, y, x)] < 1e-3, "density left at {p}");
+                }
+            }
+        }
+    }
+    assert!(inside > 0);
+
+    let frames = tmp.path().join("frames");
+    ok(&volgen(&[
+        "animate",
+        path(model),
+        "--frames",
+        "1",
+        "--extent",
+        "1,2,1",
+        "--upsample",
+        "1",
+        "--out",
+        path(&frames),
+    ]));
+    let frame = RadianceVolume::load_safetensors(frames.join("frame_0000.safetensors")).unwrap();
+    assert_eq!(frame.dims().h, 2 * s.h);
+
+    let refusals: [(&[&str], &[&str]); 5] = [
+        (&["--extent", "2,1"], &["--extent", "X,Y,Z"]),
+        (&["--extent", "0,1,1"], &["--extent", "between"]),
+        (&["--csg-outside", "tile"], &["--csg-outside", "mirror"]),
+        (
+            &["--extent", "2,1,1", "--reconstruction"],
+            &["--reconstruction"],
+        ),
+        (&["--extent", "2,1,1", "--vary-from", "2"], &["--vary-from"]),
+    ];
+    for (extra, words) in refusals {
+        let dir = tmp.path().join("refusal");
+        let mut args = vec!["sample", path(model), "--out", path(&dir)];
+        args.extend_from_slice(extra);
+        let err = failure(&volgen(&args));
+        for word in words {
+            assert!(err.contains(word), "{extra:?}: {err}");
+        }
+        assert!(
+            !dir.join("scene_0.safetensors").exists(),
+            "{extra:?} wrote a scene"
+        );
+    }
+}

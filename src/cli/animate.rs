@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rand::SeedableRng;
 use singrav::applications::WalkConfig;
-use singrav::sample::showcase_cameras;
 
+use super::extent::ExtentArgs;
 use super::model_io::{load_model, write_scene, Outputs};
 
 /// Arguments of `volgen animate`.
@@ -43,6 +43,8 @@ pub struct AnimateArgs {
     vary_from: usize,
     #[command(flatten)]
     outputs: Outputs,
+    #[command(flatten)]
+    extent: ExtentArgs,
     /// Also write the frames' views as one looping animated GIF, `animation.gif`.
     #[arg(long)]
     gif: bool,
@@ -57,14 +59,15 @@ pub fn run(args: &AnimateArgs) -> Result<()> {
         args.frames > 0,
         "--frames: expected at least 1 frame, got 0"
     );
-    let model = load_model(&args.model)?;
+    let mut model = load_model(&args.model)?;
+    args.extent.apply(&mut model)?;
     let walk = WalkConfig {
         anchor: args.anchor,
         momentum: args.momentum,
         first_moving_scale: args.first_moving_scale,
         vary_from: args.vary_from,
     };
-    let camera = showcase_cameras(1, model.render_size())?;
+    let camera = model.showcase_cameras(1)?;
     let rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let mut animation = model
         .animation(walk, rng)

@@ -13,6 +13,7 @@ use radiance_volume::Aabb;
 use rand::SeedableRng;
 use singrav::applications::{empty_voxel, Edit};
 
+use super::extent::ExtentArgs;
 use super::harmonize::{harmonize_and_write, HarmonizeArgs};
 use super::model_io::{load_model, Outputs, SceneWriter};
 use super::scene_boxes::{parse_box, parse_offset, ModelFrame};
@@ -29,8 +30,8 @@ pub struct EditArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Empty a box (scene coordinates, Z up: inside [-1, 1]^3, or the cube of the run's
-    /// --bounds). Repeatable. Edits apply in the
-    /// order: removals, duplicates, moves.
+    /// --bounds, grown by --extent). Repeatable. Edits apply in the order: removals,
+    /// duplicates, moves.
     #[arg(
         long,
         value_name = "X0,Y0,Z0,X1,Y1,Z1",
@@ -76,6 +77,8 @@ pub struct EditArgs {
     by: Vec<Vec3>,
     #[command(flatten)]
     harmonize: HarmonizeArgs,
+    #[command(flatten)]
+    extent: ExtentArgs,
     /// Views rendered per volume.
     #[arg(long, default_value_t = 3)]
     views: usize,
@@ -87,7 +90,7 @@ impl EditArgs {
     /// The edits in the order they apply, each checked against the volume box; boxes and
     /// offsets are in the scene's coordinates, mapped into the model's cube when the run was
     /// trained with `bounds`.
-    fn edits(&self, frame: ModelFrame<'_>) -> Result<Vec<Edit>> {
+    fn edits(&self, frame: ModelFrame<'_>, model_box: Aabb) -> Result<Vec<Edit>> {
         ensure!(
             self.duplicate.len() == self.to.len(),
             "--duplicate: each needs its --to (got {} --duplicate and {} --to)",
@@ -119,7 +122,7 @@ impl EditArgs {
             "nothing to edit: give --remove BOX, --duplicate BOX --to OFFSET or --move BOX --by OFFSET"
         );
         for edit in &edits {
-            edit.validate()?;
+            edit.validate_in(model_box)?;
         }
         Ok(edits)
     }
@@ -127,10 +130,15 @@ impl EditArgs {
 
 /// Generates the scene, edits it, harmonises it, and writes the three.
 pub fn run(args: &EditArgs) -> Result<()> {
-    let model = load_model(&args.model)?;
-    let edits = args.edits(ModelFrame {
-        bounds: model.config().run.bounds.as_ref(),
-    })?;
+    let mut model = load_model(&args.model)?;
+    args.extent.apply(&mut model)?;
+    let model_box = model.model_box();
+    let edits = args.edits(
+        ModelFrame {
+            bounds: model.config().run.bounds.as_ref(),
+        },
+        model_box,
+    )?;
     let harmonize_from = args.harmonize.start_scale(&model)?;
     let writer = SceneWriter::new(&model, args.views, &args.out, args.outputs)?;
 
@@ -147,7 +155,7 @@ pub fn run(args: &EditArgs) -> Result<()> {
     let empty = empty_voxel(&original, &model.config().activation())?;
     let mut edited = original;
     for edit in &edits {
-        edited = edit.apply(&edited, &empty)?;
+        edited = edit.apply_in(&edited, model_box, &empty)?;
     }
     let summary: Vec<String> = edits.iter().map(ToString::to_string).collect();
     writer.write(

@@ -11,6 +11,7 @@ mod device_check;
 mod edit;
 mod eval;
 mod export;
+mod extent;
 mod fit;
 mod harmonize;
 mod info;

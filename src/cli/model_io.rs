@@ -137,7 +137,7 @@ impl<'a> SceneWriter<'a> {
     pub fn new(model: &'a SinGrav, views: usize, dir: &'a Path, outputs: Outputs) -> Result<Self> {
         Ok(Self {
             model,
-            cameras: singrav::sample::showcase_cameras(views, model.render_size())?,
+            cameras: model.showcase_cameras(views)?,
             dir,
             outputs,
         })

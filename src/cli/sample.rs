@@ -8,10 +8,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{ensure, Context, Result};
 use rand::SeedableRng;
-use singrav::sample::{showcase_cameras, Sample};
+use singrav::sample::Sample;
 use singrav::SinGrav;
 use volrender::Camera;
 
+use super::extent::ExtentArgs;
 use super::model_io::{load_model, write_scene, Outputs};
 
 /// Arguments of `volgen sample`.
@@ -30,6 +31,8 @@ pub struct SampleArgs {
     out: PathBuf,
     #[command(flatten)]
     outputs: Outputs,
+    #[command(flatten)]
+    extent: ExtentArgs,
     /// Views rendered per scene.
     #[arg(long, default_value_t = 3)]
     views: usize,
@@ -57,8 +60,14 @@ pub fn run(args: &SampleArgs) -> Result<()> {
         args.turntable != Some(0),
         "--turntable: expected at least 1 frame, got 0"
     );
-    let model = load_model(&args.model)?;
+    let mut model = load_model(&args.model)?;
+    args.extent.apply(&mut model)?;
     // Before anything is written.
+    ensure!(
+        !args.reconstruction || args.extent.is_learned_size(),
+        "--reconstruction: the reconstruction V* has the learned scene's size; leave out \
+         --extent or --reconstruction"
+    );
     model
         .check_vary_from(args.vary_from)
         .context("--vary-from")?;
@@ -110,7 +119,7 @@ impl Views {
         let count = shown.len();
         let mut cameras = shown;
         if let Some(frames) = turntable {
-            cameras.extend(showcase_cameras(frames, model.render_size())?);
+            cameras.extend(model.showcase_cameras(frames)?);
         }
         Ok(Self {
             cameras,
@@ -120,11 +129,7 @@ impl Views {
 
     /// `shown` showcase cameras and, with `turntable`, that many orbit frames.
     fn new(model: &SinGrav, shown: usize, turntable: Option<usize>) -> Result<Self> {
-        Self::with_cameras(
-            model,
-            showcase_cameras(shown, model.render_size())?,
-            turntable,
-        )
+        Self::with_cameras(model, model.showcase_cameras(shown)?, turntable)
     }
 }
 

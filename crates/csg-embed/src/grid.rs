@@ -3,6 +3,7 @@
 use candle_core::{Device, Tensor};
 
 use crate::error::{invalid, Result};
+use crate::extended::{csg_grid_3d_over, Outside};
 
 /// The CSG coordinate of cell `i` on an axis of `n` cells: `2 ((i + 0.5) / n - 1/2) = (2i + 1)/n - 1`.
 ///
@@ -44,18 +45,8 @@ fn axis(n: usize, what: &'static str, device: &Device) -> Result<Tensor> {
 /// # Ok::<(), csg_embed::Error>(())
 /// ```
 pub fn csg_grid_3d(d: usize, h: usize, w: usize, device: &Device) -> Result<Tensor> {
-    let shape = (d, h, w);
-    let x = axis(w, "width", device)?.reshape((1, 1, w))?;
-    let y = axis(h, "height", device)?.reshape((1, h, 1))?;
-    let z = axis(d, "depth", device)?.reshape((d, 1, 1))?;
-    Ok(Tensor::stack(
-        &[
-            x.broadcast_as(shape)?,
-            y.broadcast_as(shape)?,
-            z.broadcast_as(shape)?,
-        ],
-        0,
-    )?)
+    // The learned box itself: every rule for the outside gives the same grid.
+    csg_grid_3d_over((d, h, w), [1.0; 3], Outside::Extend, device)
 }
 
 /// The 3D CSG grid repeated over a batch: shape `(N, 3, D, H, W)`, every item equal to

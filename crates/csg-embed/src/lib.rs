@@ -23,9 +23,11 @@
 //! ```
 
 mod error;
+mod extended;
 mod fourier;
 mod grid;
 
 pub use error::{Error, Result};
+pub use extended::{csg_grid_3d_over, Outside};
 pub use fourier::{fourier_channels, fourier_features, octave_frequencies};
 pub use grid::{csg_coordinate, csg_grid_2d, csg_grid_3d, csg_grid_3d_batched};

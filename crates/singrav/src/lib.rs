@@ -41,6 +41,7 @@ pub mod config;
 mod error;
 pub mod eval;
 pub mod export;
+pub mod extent;
 mod io;
 pub mod model;
 pub mod noise;

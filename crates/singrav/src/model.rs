@@ -8,12 +8,13 @@ use std::sync::Arc;
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
 use candle_nn::{Module, VarBuilder, VarMap};
 use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
-use radiance_volume::{resample_tensor, GridDims};
+use radiance_volume::resample_tensor;
 
 use crate::active_set::active_sites;
 use crate::config::TrainConfig;
 use crate::error::{invalid, Result};
-use crate::noise::gaussian_volume;
+use crate::extent::Extended;
+use crate::noise::{gaussian_grid, gaussian_volume};
 
 /// Channels of the coarsest noise volume z_1 (it is added to the 3-channel CSG grid).
 pub const FIRST_NOISE_CHANNELS: usize = 3;
@@ -38,6 +39,8 @@ pub struct SinGrav {
     /// ([`Schedule::reconstruction_fit_steps`](crate::config::Schedule::reconstruction_fit_steps)): `(1, 4, s, s, s)` raw values.
     reconstruction_detail: Option<Tensor>,
     csg: Option<Tensor>,
+    /// The grids of scenes generated at an extent other than one ([`SinGrav::set_extent`]).
+    pub(crate) extended: Option<Extended>,
 }
 
 /// Checkpoint name of [`SinGrav::reconstruction_detail`].
@@ -165,6 +168,7 @@ impl SinGrav {
             fine_z_star: Vec::new(),
             reconstruction_detail: None,
             csg,
+            extended: None,
         })
     }
 
@@ -281,13 +285,7 @@ impl SinGrav {
                     VOLUME_CHANNELS
                 };
                 let amp = self.noise_amps.get(n - 1).copied().unwrap_or(0.0);
-                gaussian_volume(
-                    rng,
-                    channels,
-                    self.config.pyramid.volume_sizes[n - 1],
-                    amp,
-                    &self.device,
-                )
+                gaussian_grid(rng, channels, self.scale_dims(n), amp, &self.device)
             })
             .collect()
     }
@@ -315,9 +313,14 @@ impl SinGrav {
     }
 
     /// Errors unless `vary_from` is one of the 3D scales built, as [`SinGrav::draw_noise_from`]
-    /// needs it (so callers can refuse it before any work).
+    /// needs it (so callers can refuse it before any work), and, at an
+    /// [extent](SinGrav::set_extent) other than one, unless it is 1.
     pub fn check_vary_from(&self, vary_from: usize) -> Result<()> {
-        check_vary_from(vary_from, self.volume_scales())
+        check_vary_from(vary_from, self.volume_scales())?;
+        if vary_from > 1 {
+            self.check_learned_size("the reconstruction noise the coarser scales keep")?;
+        }
+        Ok(())
     }
 
     /// The optimised reconstruction noise z*_n of 3D scale `n` >= 2, when the configuration
@@ -329,6 +332,7 @@ impl SinGrav {
     /// The reconstruction noise for 3D scales `1..=scales`: {z*_1, 0, ..., 0} as in SinGAN, or
     /// with `reconstruction_noise_lr > 0` the optimised z*_n at the scales n >= 2.
     pub fn reconstruction_noise(&self, scales: usize) -> Result<Vec<Tensor>> {
+        self.check_learned_size("the reconstruction noise")?;
         let mut noise = vec![self.z_star.clone()];
         for n in 2..=scales {
             let z = match self.reconstruction_noise_var(n) {
@@ -407,7 +411,11 @@ impl SinGrav {
             .generators
             .first()
             .ok_or_else(|| invalid("scale", "no 3D scale is built"))?;
-        let input = match &self.csg {
+        let csg = match &self.extended {
+            Some(extended) => &extended.csg,
+            None => &self.csg,
+        };
+        let input = match csg {
             Some(csg) => (z + csg)?,
             None => z.clone(),
         };
@@ -440,8 +448,7 @@ impl SinGrav {
 
     /// Resamples a raw volume to the size of 3D scale `n` (trilinear, differentiable).
     pub fn upsample_to_scale(&self, volume: &Tensor, n: usize) -> Result<Tensor> {
-        let size = self.config.pyramid.volume_sizes[n - 1];
-        Ok(resample_tensor(volume, GridDims::cube(size))?)
+        Ok(resample_tensor(volume, self.scale_dims(n))?)
     }
 
     /// Applies G_N to renderings `(B, 3, h, w)`, giving `(B, 3, 2h, 2w)`.

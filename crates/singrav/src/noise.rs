@@ -2,6 +2,7 @@
 //! an uninterrupted one would, and Gaussian noise volumes drawn from it.
 
 use candle_core::{Device, Tensor};
+use radiance_volume::GridDims;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -39,7 +40,28 @@ pub fn gaussian_volume(
     amplitude: f64,
     device: &Device,
 ) -> Result<Tensor> {
-    let count = channels * size * size * size;
+    gaussian_grid(rng, channels, GridDims::cube(size), amplitude, device)
+}
+
+/// A `(1, channels, D, H, W)` volume of independent N(0, amplitude^2) values over `dims`,
+/// drawn in the tensor's order (a cube draws what [`gaussian_volume`] draws).
+///
+/// ```
+/// use rand::SeedableRng;
+/// let dims = radiance_volume::GridDims::new(2, 3, 4);
+/// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+/// let z = singrav::noise::gaussian_grid(&mut rng, 4, dims, 0.5, &candle_core::Device::Cpu)?;
+/// assert_eq!(z.dims(), &[1, 4, 2, 3, 4]);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn gaussian_grid(
+    rng: &mut impl rand::Rng,
+    channels: usize,
+    dims: GridDims,
+    amplitude: f64,
+    device: &Device,
+) -> Result<Tensor> {
+    let count = channels * dims.voxel_count();
     let values: Vec<f32> = (0..count)
         .map(|_| {
             let x: f64 = StandardNormal.sample(rng);
@@ -48,7 +70,7 @@ pub fn gaussian_volume(
         .collect();
     Ok(Tensor::from_vec(
         values,
-        (1, channels, size, size, size),
+        (1, channels, dims.d, dims.h, dims.w),
         device,
     )?)
 }

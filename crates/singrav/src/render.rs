@@ -1,7 +1,7 @@
 //! Rendering raw generated volumes into image tensors for the critics and the losses.
 
 use candle_core::Tensor;
-use radiance_volume::Activation;
+use radiance_volume::{Aabb, Activation};
 use volrender::{render, Camera, DensityInterpolation, Rays, RenderConfig, Sampler};
 
 use crate::config::TrainConfig;
@@ -31,6 +31,20 @@ impl ViewRenderer {
             config: render,
             depth_norm,
         }
+    }
+
+    /// Renders volumes over `aabb` (in the model's units) instead of `[-1, 1]^3`: scenes
+    /// generated at another [extent](crate::SinGrav::set_extent). The samples per ray grow with
+    /// the box's diagonal, so along the longest rays they stay as far apart as in the learned
+    /// box.
+    pub fn over(mut self, aabb: Aabb) -> Self {
+        if let Sampler::Uniform { samples } = self.config.sampler {
+            let longest = aabb.size().length() / Aabb::CUBE.size().length();
+            let samples = (samples as f32 * longest.max(1.0)).ceil() as usize;
+            self.config = self.config.with_sampler(Sampler::Uniform { samples });
+        }
+        self.config.aabb = aabb;
+        self
     }
 
     /// Also renders opacity (when `with_opacity`): [`ViewRenderer::render_joined`] then appends

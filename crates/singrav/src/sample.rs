@@ -39,11 +39,16 @@ pub struct Sample {
 /// # Ok::<(), singrav::Error>(())
 /// ```
 pub fn showcase_cameras(count: usize, size: usize) -> Result<Vec<Camera>> {
+    showcase_cameras_at(count, size, PAPER_RADIUS)
+}
+
+/// [`showcase_cameras`] at `radius` from the centre.
+fn showcase_cameras_at(count: usize, size: usize, radius: f32) -> Result<Vec<Camera>> {
     let elevation = 35f32.to_radians();
     (0..count)
         .map(|i| {
             let azimuth = std::f32::consts::TAU * (i as f32 + 0.125) / count as f32;
-            let eye = PAPER_RADIUS
+            let eye = radius
                 * Vec3::new(
                     elevation.cos() * azimuth.cos(),
                     elevation.cos() * azimuth.sin(),
@@ -164,10 +169,11 @@ impl SinGrav {
     }
 
     /// The physical volume of a raw volume `(1, 4, s, s, s)`, through the configuration's
-    /// activation, in the scene's coordinates: over `[-1, 1]^3`, or when the run was trained
+    /// activation, in the scene's coordinates: over `[-1, 1]^3` (or [`SinGrav::model_box`] at
+    /// another [extent](SinGrav::set_extent)), or when the run was trained
     /// with [`RunPolicy::bounds`](crate::config::RunPolicy::bounds) over their
-    /// [`cube`](rgbd_dataset::SceneBounds::cube) with density divided by its half side (the
-    /// same opacity along the longer rays).
+    /// [`cube`](rgbd_dataset::SceneBounds::cube) (scaled alike) with density divided by its half
+    /// side (the same opacity along the longer rays).
     pub fn to_physical(&self, raw: &Tensor) -> Result<RadianceVolume> {
         let volume = self.config().activation().apply(&raw.squeeze(0)?)?;
         let (cube, half_side) = self.scene_cube();
@@ -180,15 +186,19 @@ impl SinGrav {
         Ok(RadianceVolume::new(volume, cube)?)
     }
 
-    /// The model's cube in the scene's coordinates and its half side: `[-1, 1]^3` and 1, or
-    /// with [`RunPolicy::bounds`](crate::config::RunPolicy::bounds) their cube.
+    /// The model's box ([`SinGrav::model_box`]) in the scene's coordinates and the half side of
+    /// the learned cube there: the box itself and 1, or with
+    /// [`RunPolicy::bounds`](crate::config::RunPolicy::bounds) the box placed in their cube.
     fn scene_cube(&self) -> (Aabb, f32) {
-        self.config()
-            .run
-            .bounds
-            .map_or((Aabb::CUBE, 1.0), |bounds| {
-                (bounds.cube(), bounds.half_side())
-            })
+        let model_box = self.model_box();
+        self.config().run.bounds.map_or((model_box, 1.0), |bounds| {
+            let (centre, half) = (bounds.cube().center(), bounds.half_side());
+            let scene_box = Aabb {
+                min: centre + model_box.min * half,
+                max: centre + model_box.max * half,
+            };
+            (scene_box, half)
+        })
     }
 
     /// A raw volume `(1, 4, s, s, s)` as a renderer outside the model takes it, in the scene's
@@ -332,6 +342,7 @@ impl SinGrav {
     /// # Ok::<(), singrav::Error>(())
     /// ```
     pub fn reconstruct(&self) -> Result<Tensor> {
+        self.check_learned_size("the reconstruction V*")?;
         let noise = self.reconstruction_noise(self.volume_scales())?;
         let volume = self.generate(&noise)?.detach();
         match self.reconstruction_detail() {
@@ -349,6 +360,7 @@ impl SinGrav {
             1.0,
             false,
         )
+        .over(self.model_box())
     }
 
     /// Colour renderings of the 3D pyramid as the model outputs them: doubled by G_N when it
@@ -359,6 +371,24 @@ impl SinGrav {
         } else {
             Ok(coarse)
         }
+    }
+
+    /// [`showcase_cameras`] for this model's scenes: at the learned size the paper's radius and
+    /// [`SinGrav::render_size`]; at a larger [extent](SinGrav::set_extent) both times the
+    /// model box's largest half side, so the whole scene is in view at the learned pixel size.
+    ///
+    /// ```no_run
+    /// # let device = candle_core::Device::Cpu;
+    /// let (mut model, _) = singrav::SinGrav::load("runs/stones".as_ref(), &device)?;
+    /// model.set_extent("2,2,1".parse()?, csg_embed::Outside::Mirror)?;
+    /// let cameras = model.showcase_cameras(3)?;
+    /// assert_eq!(cameras[0].width, 2 * model.render_size());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn showcase_cameras(&self, count: usize) -> Result<Vec<Camera>> {
+        let scale = self.model_box().max.max_element().max(1.0);
+        let size = (self.render_size() as f32 * scale).round() as usize;
+        showcase_cameras_at(count, size, PAPER_RADIUS * scale)
     }
 
     /// The rendering size the 3D pyramid produces (cameras for [`SinGrav::sample`] use it).

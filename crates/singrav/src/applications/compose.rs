@@ -51,7 +51,7 @@ impl Placement {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn validate(&self) -> Result<()> {
-        check_placement(self.region, Some(self.offset))
+        check_placement(self.region, Some(self.offset), Aabb::CUBE)
             .map_err(|why| invalid(format!("placement `{self}`"), why))
     }
 
@@ -75,8 +75,8 @@ impl Placement {
     /// ```
     pub fn apply(&self, base: &Tensor, source: &Tensor) -> Result<Tensor> {
         let fail = |why: String| invalid(format!("placement `{self}`"), why);
-        let base = raw_volume(base).map_err(fail)?;
-        let source = raw_volume(source).map_err(fail)?;
+        let base = raw_volume(base, Aabb::CUBE).map_err(fail)?;
+        let source = raw_volume(source, Aabb::CUBE).map_err(fail)?;
         self.validate()?;
         let mask = box_mask(&source, self.region).map_err(fail)?;
         let shift = voxel_shift(&source, self.offset);
@@ -137,7 +137,7 @@ pub fn ground(
     voxel: f32,
     empty: &[f32; 4],
 ) -> Result<Tensor> {
-    let volume = raw_volume(raw).map_err(|why| invalid("raw", why))?;
+    let volume = raw_volume(raw, Aabb::CUBE).map_err(|why| invalid("raw", why))?;
     if !(voxel.is_finite() && voxel > 0.0) {
         return Err(invalid(
             "voxel",

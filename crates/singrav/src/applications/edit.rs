@@ -98,8 +98,16 @@ impl Edit {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn validate(&self) -> Result<()> {
+        self.validate_in(Aabb::CUBE)
+    }
+
+    /// [`Edit::validate`] for a volume over `model_box` instead of `[-1, 1]^3` (a scene
+    /// generated at another [extent](crate::SinGrav::set_extent): its
+    /// [`model_box`](crate::SinGrav::model_box)).
+    pub fn validate_in(&self, model_box: Aabb) -> Result<()> {
         let (region, offset) = self.parts();
-        check_placement(region, offset).map_err(|why| invalid(format!("edit `{self}`"), why))
+        check_placement(region, offset, model_box)
+            .map_err(|why| invalid(format!("edit `{self}`"), why))
     }
 
     /// Applies the edit to a raw volume `(1, 4, s, s, s)` over `[-1, 1]^3` (a scene's finest 3D
@@ -125,9 +133,14 @@ impl Edit {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn apply(&self, raw: &Tensor, empty: &[f32; 4]) -> Result<Tensor> {
+        self.apply_in(raw, Aabb::CUBE, empty)
+    }
+
+    /// [`Edit::apply`] to a raw volume over `model_box` (see [`Edit::validate_in`]).
+    pub fn apply_in(&self, raw: &Tensor, model_box: Aabb, empty: &[f32; 4]) -> Result<Tensor> {
         let fail = |why: String| invalid(format!("edit `{self}`"), why);
-        let volume = raw_volume(raw).map_err(fail)?;
-        self.validate()?;
+        let volume = raw_volume(raw, model_box).map_err(fail)?;
+        self.validate_in(model_box)?;
         let (region, offset) = self.parts();
         let mask = box_mask(&volume, region).map_err(fail)?;
         let Some(offset) = offset else {
@@ -146,9 +159,12 @@ impl Edit {
     }
 }
 
-/// A raw volume `(1, 4, D, H, W)` over `[-1, 1]^3` as a radiance volume, or why not (for a
+/// A raw volume `(1, 4, D, H, W)` over `model_box` as a radiance volume, or why not (for a
 /// message naming the edit or placement).
-pub(super) fn raw_volume(raw: &Tensor) -> std::result::Result<RadianceVolume, String> {
+pub(super) fn raw_volume(
+    raw: &Tensor,
+    model_box: Aabb,
+) -> std::result::Result<RadianceVolume, String> {
     let dims = raw.dims();
     if dims.len() != 5 || dims[0] != 1 || dims[1] != 4 {
         return Err(format!(
@@ -157,7 +173,7 @@ pub(super) fn raw_volume(raw: &Tensor) -> std::result::Result<RadianceVolume, St
     }
     raw.squeeze(0)
         .map_err(|e| e.to_string())
-        .and_then(|t| RadianceVolume::new(t, Aabb::CUBE).map_err(|e| e.to_string()))
+        .and_then(|t| RadianceVolume::new(t, model_box).map_err(|e| e.to_string()))
 }
 
 /// The mask of the voxels whose centres `region` holds, or why it cannot be used (it holds
@@ -188,30 +204,37 @@ pub(super) fn voxel_shift(volume: &RadianceVolume, offset: Vec3) -> [i64; 3] {
     [cells.z as i64, cells.y as i64, cells.x as i64]
 }
 
-/// Errors unless `region` and, with an offset, `region` moved by it lie inside the volume box.
+/// Errors unless `region` and, with an offset, `region` moved by it lie inside the volume box
+/// `model_box`.
 pub(super) fn check_placement(
     region: Aabb,
     offset: Option<Vec3>,
+    model_box: Aabb,
 ) -> std::result::Result<(), String> {
-    check_inside("box", region)?;
+    check_inside("box", region, model_box)?;
     if let Some(offset) = offset {
         let destination = Aabb {
             min: region.min + offset,
             max: region.max + offset,
         };
-        check_inside("destination", destination)?;
+        check_inside("destination", destination, model_box)?;
     }
     Ok(())
 }
 
-/// Errors unless `region` lies inside the volume box `[-1, 1]^3`.
-fn check_inside(what: &str, region: Aabb) -> std::result::Result<(), String> {
-    if Aabb::CUBE.contains(region.min) && Aabb::CUBE.contains(region.max) {
+/// Errors unless `region` lies inside the volume box `model_box`.
+fn check_inside(what: &str, region: Aabb, model_box: Aabb) -> std::result::Result<(), String> {
+    if model_box.contains(region.min) && model_box.contains(region.max) {
         Ok(())
-    } else {
+    } else if model_box == Aabb::CUBE {
         Err(format!(
             "the {what} {} .. {} must lie inside the volume box [-1, 1]^3",
             region.min, region.max
+        ))
+    } else {
+        Err(format!(
+            "the {what} {} .. {} must lie inside the volume box {} .. {}",
+            region.min, region.max, model_box.min, model_box.max
         ))
     }
 }

@@ -41,13 +41,13 @@ impl SinGrav {
                 ),
             ));
         }
-        let finest = self.config().pyramid.volume_sizes[last - 1];
-        if edited.dims() != [1, 4, finest, finest, finest] {
+        let finest = self.scale_dims(last);
+        let expected = [1, 4, finest.d, finest.h, finest.w];
+        if edited.dims() != expected {
             return Err(invalid(
                 "edited",
                 format!(
-                    "expected a raw volume of the finest 3D scale, shape [1, 4, {finest}, \
-                     {finest}, {finest}], got {:?}",
+                    "expected a raw volume of the finest 3D scale, shape {expected:?}, got {:?}",
                     edited.dims()
                 ),
             ));
