@@ -131,6 +131,51 @@ fn mesh_writes_each_format_and_refuses_bad_input_by_name() {
         let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
         assert!((r - 0.5).abs() < 0.15, "{p:?}");
     }
+    // Decimated to a quarter and smoothed: a quarter of the triangles, read back by the same
+    // reader, still on the ball.
+    let light = dir.path().join("light.glb");
+    let text = common::ok(&volgen(&[
+        "mesh",
+        &vol,
+        "--out",
+        common::path(&light),
+        "--smooth",
+        "3",
+        "--decimate",
+        "0.25",
+    ]));
+    assert!(text.contains("closed"), "{text}");
+    let (document, _, _) = gltf::import(&light).unwrap();
+    let triangles = |document: &gltf::Document| -> usize {
+        let primitive = document
+            .meshes()
+            .next()
+            .unwrap()
+            .primitives()
+            .next()
+            .unwrap();
+        primitive.indices().unwrap().count() / 3
+    };
+    let full = triangles(&gltf::import(dir.path().join("meshes/ball.glb")).unwrap().0);
+    let quarter = triangles(&document);
+    assert!(
+        quarter <= full / 4 + 2 && quarter >= full / 8,
+        "{full} -> {quarter}"
+    );
+    for bad in ["0", "1.5", "x"] {
+        let err = common::failure(&volgen(&[
+            "mesh",
+            &vol,
+            "--out",
+            common::path(&light),
+            "--decimate",
+            bad,
+        ]));
+        assert!(
+            err.contains("--decimate") && err.contains("(0, 1]"),
+            "{err}"
+        );
+    }
     let out = dir.path().join("ball.stl");
     let err = common::failure(&volgen(&["mesh", &vol, "--out", common::path(&out)]));
     assert!(err.contains("ball.stl") && err.contains(".glb"), "{err}");

@@ -829,6 +829,10 @@ fn sample_reconstruction_writes_v_star_like_any_sample() {
         // micro's V* is thin fog: its densest voxel stops about a sixth of the light.
         "--mesh-level",
         "0.1",
+        "--mesh-smooth",
+        "1",
+        "--mesh-decimate",
+        "0.5",
         "--turntable",
         "5",
         "--out",

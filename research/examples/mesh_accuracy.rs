@@ -2,7 +2,8 @@
 //! seen from a dataset's cameras, the mesh by a z-buffer rasteriser of its triangles with their
 //! vertex colours interpolated (unlit: a radiance volume's colour is what a camera sees), the
 //! volume by volgen's renderer, both over a white background. Per surface level: the silhouette
-//! IoU (mesh coverage against volume opacity >= 1/2) and the colour PSNR of the whole images.
+//! IoU (mesh coverage against volume opacity >= 1/2) and the colour PSNR of the whole images;
+//! at the default level also after `--smooth` and `--decimate`, with the `.glb` file's size.
 //! Used for docs/formats.md ("Meshes") and docs/journal/2026-12-arrangement.md.
 //!
 //! `cargo run --release -p research --example mesh_accuracy -- VOLUME.safetensors DATASET [VIEWS]`
@@ -14,8 +15,12 @@ use rgbd_dataset::Dataset;
 use volrender::{render_image, Camera, RenderConfig, Sampler};
 use volume_mesh::{Mesh, MeshOptions};
 
-/// Surface levels compared (opacity across one voxel; 0.5 is `volgen mesh`'s default).
+/// Surface levels compared (opacity across one voxel; 0.25 is `volgen mesh`'s default).
 const LEVELS: [f32; 5] = [0.1, 0.25, 0.5, 0.75, 0.9];
+/// Smoothing rounds compared at the default level (`--smooth`).
+const SMOOTHING: [usize; 3] = [2, 5, 10];
+/// Shares of the triangles compared at the default level (`--decimate`).
+const DECIMATION: [f32; 3] = [0.5, 0.25, 0.1];
 
 /// A rasterised mesh: colour over white, and whether each pixel is covered.
 struct Raster {
@@ -111,38 +116,65 @@ fn main() {
         .map(|camera| render_image(&volume, camera, &config).unwrap())
         .collect();
     println!(
-        "| level | vertices | triangles | silhouette IoU | colour PSNR (dB) | colour PSNR where both cover (dB) |"
+        "| mesh | vertices | triangles | .glb bytes | silhouette IoU | colour PSNR (dB) | colour PSNR where both cover (dB) |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
+    let default_level = MeshOptions::default().level;
     for level in LEVELS {
         let mesh = Mesh::from_volume(&volume, &MeshOptions { level }).unwrap();
-        let (mut both, mut either, mut squared, mut pixels) = (0usize, 0usize, 0f64, 0usize);
-        let (mut squared_both, mut channels_both) = (0f64, 0usize);
-        for (camera, image) in cameras.iter().zip(&rendered) {
-            let raster = rasterise(&mesh, camera);
-            for (i, (&mesh_covers, colour)) in raster.covered.iter().zip(&raster.rgb).enumerate() {
-                let volume_covers = image.opacity[i] >= 0.5;
-                both += usize::from(mesh_covers && volume_covers);
-                either += usize::from(mesh_covers || volume_covers);
-                let error: f64 = (0..3)
-                    .map(|c| f64::from(colour[c] - image.rgb[i][c]).powi(2))
-                    .sum();
-                squared += error;
-                pixels += 3;
-                if mesh_covers && volume_covers {
-                    squared_both += error;
-                    channels_both += 3;
-                }
+        print_row(&format!("level {level}"), &mesh, &cameras, &rendered);
+        if level != default_level {
+            continue;
+        }
+        // At the default level, what smoothing and decimation change.
+        for iterations in SMOOTHING {
+            let name = format!("level {level}, --smooth {iterations}");
+            print_row(&name, &mesh.smoothed(iterations), &cameras, &rendered);
+        }
+        for fraction in DECIMATION {
+            let name = format!("level {level}, --decimate {fraction}");
+            print_row(
+                &name,
+                &mesh.decimated(fraction).unwrap(),
+                &cameras,
+                &rendered,
+            );
+        }
+    }
+}
+
+/// One row of the table: `mesh` rasterised from `cameras` against the volume's renderings.
+fn print_row(name: &str, mesh: &Mesh, cameras: &[Camera], rendered: &[volrender::Image]) {
+    let (mut both, mut either, mut squared, mut pixels) = (0usize, 0usize, 0f64, 0usize);
+    let (mut squared_both, mut channels_both) = (0f64, 0usize);
+    for (camera, image) in cameras.iter().zip(rendered) {
+        let raster = rasterise(mesh, camera);
+        for (i, (&mesh_covers, colour)) in raster.covered.iter().zip(&raster.rgb).enumerate() {
+            let volume_covers = image.opacity[i] >= 0.5;
+            both += usize::from(mesh_covers && volume_covers);
+            either += usize::from(mesh_covers || volume_covers);
+            let error: f64 = (0..3)
+                .map(|c| f64::from(colour[c] - image.rgb[i][c]).powi(2))
+                .sum();
+            squared += error;
+            pixels += 3;
+            if mesh_covers && volume_covers {
+                squared_both += error;
+                channels_both += 3;
             }
         }
-        let psnr = |sum: f64, n: usize| 10.0 * (n as f64 / sum).log10();
-        println!(
-            "| {level} | {} | {} | {:.3} | {:.2} | {:.2} |",
-            mesh.vertex_count(),
-            mesh.triangles.len(),
-            both as f64 / either.max(1) as f64,
-            psnr(squared, pixels),
-            psnr(squared_both, channels_both)
-        );
     }
+    let file = std::env::temp_dir().join(format!("mesh_accuracy_{}.glb", std::process::id()));
+    mesh.write(&file).unwrap();
+    let bytes = std::fs::metadata(&file).unwrap().len();
+    std::fs::remove_file(&file).unwrap();
+    let psnr = |sum: f64, n: usize| 10.0 * (n as f64 / sum).log10();
+    println!(
+        "| {name} | {} | {} | {bytes} | {:.3} | {:.2} | {:.2} |",
+        mesh.vertex_count(),
+        mesh.triangles.len(),
+        both as f64 / either.max(1) as f64,
+        psnr(squared, pixels),
+        psnr(squared_both, channels_both)
+    );
 }

@@ -144,7 +144,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         exr_slices: cfg!(feature = "exr"),
         upsample: None,
         mesh: None,
-        mesh_level: volume_mesh::DEFAULT_LEVEL,
+        mesh_flags: super::mesh::MeshFlags::default(),
     };
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let draws = Draws {

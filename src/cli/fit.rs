@@ -35,12 +35,11 @@ pub struct FitArgs {
     #[arg(long, value_name = "DIR")]
     exr_slices: Option<PathBuf>,
     /// Also write the volume's surface as a coloured mesh to this file (.glb, .gltf, .ply,
-    /// .obj), at opacity level `--mesh-level`.
+    /// .obj), at opacity level `--mesh-level` (also `--mesh-smooth`, `--mesh-decimate`).
     #[arg(long, value_name = "FILE")]
     mesh: Option<PathBuf>,
-    /// The mesh's surface level: opacity across one voxel, in (0, 1).
-    #[arg(long, value_name = "L", default_value_t = volume_mesh::DEFAULT_LEVEL, value_parser = super::mesh::surface_level)]
-    mesh_level: f32,
+    #[command(flatten)]
+    mesh_flags: super::mesh::MeshFlags,
     /// Optimisation steps (default 1000 when --seconds is not given).
     #[arg(long, value_name = "K", conflicts_with = "seconds")]
     steps: Option<usize>,
@@ -327,7 +326,7 @@ fn write_outputs(
         write_exr_slices(&volume, dir, &stem, &Encoding::default())?;
     }
     if let Some(file) = &args.mesh {
-        super::mesh::write_mesh(&volume, file, args.mesh_level)?;
+        super::mesh::write_mesh(&volume, file, args.mesh_flags.shape())?;
     }
     println!(
         "wrote {} (views: {}, report: {})",

@@ -1,6 +1,7 @@
-//! `volgen mesh VOLUME --out FILE.glb|.gltf|.ply|.obj [--level L]`: a volume's surface as a
-//! coloured triangle mesh, in the volume's own coordinates; and the `--mesh` outputs of the
-//! commands that write volumes.
+//! `volgen mesh VOLUME --out FILE.glb|.gltf|.ply|.obj [--level L] [--smooth N] [--decimate F]`:
+//! a volume's surface as a coloured triangle mesh, in the volume's own coordinates; and the
+//! `--mesh` outputs of the commands that write volumes (`--mesh-level`, `--mesh-smooth`,
+//! `--mesh-decimate`).
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +21,69 @@ pub struct MeshArgs {
     /// The surface's opacity across one voxel, in (0, 1): lower takes in thinner matter.
     #[arg(long, default_value_t = DEFAULT_LEVEL, value_parser = surface_level)]
     level: f32,
+    /// Rounds of Taubin smoothing: rounds off the voxel steps (docs/formats.md measures what
+    /// it changes).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    smooth: usize,
+    /// Keep about this share of the triangles, in (0, 1] (meshoptimizer's edge collapses):
+    /// 0.25 writes a file a quarter the size that matches the volume as well (docs/formats.md).
+    #[arg(long, value_name = "F", default_value_t = 1.0, value_parser = triangle_share)]
+    decimate: f32,
+}
+
+/// How the meshes of `--mesh` are made, on the commands that write volumes.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct MeshFlags {
+    /// The meshes' surface level: opacity across one voxel, in (0, 1).
+    #[arg(long, value_name = "L", default_value_t = DEFAULT_LEVEL, value_parser = surface_level)]
+    pub mesh_level: f32,
+    /// Rounds of Taubin smoothing of the meshes (as `volgen mesh --smooth`).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub mesh_smooth: usize,
+    /// Keep about this share of the meshes' triangles, in (0, 1] (as `volgen mesh --decimate`).
+    #[arg(long, value_name = "F", default_value_t = 1.0, value_parser = triangle_share)]
+    pub mesh_decimate: f32,
+}
+
+impl Default for MeshFlags {
+    /// The flags' defaults: the default level, no smoothing, every triangle.
+    fn default() -> Self {
+        Self {
+            mesh_level: DEFAULT_LEVEL,
+            mesh_smooth: 0,
+            mesh_decimate: 1.0,
+        }
+    }
+}
+
+impl MeshFlags {
+    /// The mesh these flags ask for.
+    pub fn shape(&self) -> MeshShape {
+        MeshShape {
+            level: self.mesh_level,
+            smooth: self.mesh_smooth,
+            decimate: self.mesh_decimate,
+        }
+    }
+}
+
+/// What [`write_mesh`] makes of a volume: the surface at `level`, smoothed `smooth` rounds,
+/// then decimated to the share `decimate` of its triangles.
+#[derive(Debug, Clone, Copy)]
+pub struct MeshShape {
+    pub level: f32,
+    pub smooth: usize,
+    pub decimate: f32,
+}
+
+/// Parses a share of triangles (`--decimate`, `--mesh-decimate`): in (0, 1].
+fn triangle_share(text: &str) -> std::result::Result<f32, String> {
+    match text.parse::<f32>() {
+        Ok(share) if share > 0.0 && share <= 1.0 => Ok(share),
+        _ => Err(format!(
+            "expected a share of the triangles in (0, 1], got {text:?}"
+        )),
+    }
 }
 
 /// Parses a surface level (`--level`, `--mesh-level`): an opacity strictly between 0 and 1.
@@ -54,7 +118,12 @@ pub fn run(args: &MeshArgs) -> Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("creating {}", parent.display()))?;
     }
-    let mesh = write_mesh(&volume, &args.out, args.level)
+    let shape = MeshShape {
+        level: args.level,
+        smooth: args.smooth,
+        decimate: args.decimate,
+    };
+    let mesh = write_mesh(&volume, &args.out, shape)
         .with_context(|| format!("meshing {}", args.volume.display()))?;
     println!(
         "wrote {} vertices, {} triangles ({}, {} non-manifold edges, area {:.4}) at opacity \
@@ -70,10 +139,12 @@ pub fn run(args: &MeshArgs) -> Result<()> {
     Ok(())
 }
 
-/// The surface of `volume` at opacity `level`, written to `path` (its extension picks the
+/// The surface of `volume` as `shape` asks, written to `path` (its extension picks the
 /// format).
-pub fn write_mesh(volume: &RadianceVolume, path: &Path, level: f32) -> Result<Mesh> {
-    let mesh = Mesh::from_volume(volume, &MeshOptions { level })?;
+pub fn write_mesh(volume: &RadianceVolume, path: &Path, shape: MeshShape) -> Result<Mesh> {
+    let mesh = Mesh::from_volume(volume, &MeshOptions { level: shape.level })?
+        .smoothed(shape.smooth)
+        .decimated(shape.decimate)?;
     mesh.write(path)?;
     Ok(mesh)
 }

@@ -24,9 +24,8 @@ pub struct Outputs {
     /// docs/formats.md, "Meshes").
     #[arg(long, value_name = "FORMAT", value_parser = super::mesh::mesh_format)]
     pub mesh: Option<volume_mesh::MeshFormat>,
-    /// The meshes' surface level: opacity across one voxel, in (0, 1).
-    #[arg(long, value_name = "L", default_value_t = volume_mesh::DEFAULT_LEVEL, value_parser = super::mesh::surface_level)]
-    pub mesh_level: f32,
+    #[command(flatten)]
+    pub mesh_flags: super::mesh::MeshFlags,
     /// Write the volumes (safetensors, VDB, EXR) on a grid K times finer per axis, K odd.
     /// Tools that interpolate physical density (Blender, OpenVDB) render a run trained with
     /// post-activated density (`tiny`'s default) as volgen does only on a finer grid: at 1 its
@@ -116,7 +115,7 @@ pub fn write_scene(
     }
     if let Some(format) = outputs.mesh {
         let file = dir.join(format!("{stem}.{}", format.extension()));
-        super::mesh::write_mesh(volume, &file, outputs.mesh_level)
+        super::mesh::write_mesh(volume, &file, outputs.mesh_flags.shape())
             .with_context(|| format!("writing the mesh {}", file.display()))?;
     }
     Ok(dir.join(format!("{stem}.*")))

@@ -4,7 +4,8 @@
 //! [`Mesh::from_volume`] extracts the surface where a volume's opacity across one voxel crosses
 //! a level ([`MeshOptions::level`], default [`DEFAULT_LEVEL`]) with Surface Nets
 //! (`fast-surface-nets`), in the volume's world coordinates, with outward normals and vertex
-//! colours from the colour grid; [`Mesh::write`] writes it as binary glTF (`.glb`), glTF with
+//! colours from the colour grid; [`Mesh::smoothed`] takes the voxel steps out and
+//! [`Mesh::decimated`] keeps a share of the triangles; [`Mesh::write`] writes it as binary glTF (`.glb`), glTF with
 //! an embedded buffer (`.gltf`), binary PLY (`.ply`) or OBJ with vertex colours (`.obj`).
 //!
 //! ```
@@ -25,6 +26,7 @@
 mod error;
 mod extract;
 mod mesh;
+mod refine;
 mod write;
 
 pub use error::{Error, Result};
