@@ -327,6 +327,21 @@ fn bounds_are_recorded_and_samples_land_in_the_scene() {
     assert_eq!(aabb.max.to_array(), [1.5, 1.5, 1.0]);
     let from_vdb = RadianceVolume::read_vdb(samples.join("scene_0.vdb"), volume.grid()).unwrap();
     assert_eq!(from_vdb.aabb(), aabb);
+    // Twice as wide, in the scene's coordinates: the cube grown about its centre along x.
+    let wide = tmp.path().join("wide");
+    ok(&volgen(&[
+        "sample",
+        path(&run),
+        "--out",
+        path(&wide),
+        "--count",
+        "1",
+        "--extent",
+        "2,1,1",
+    ]));
+    let grown = RadianceVolume::load_safetensors(wide.join("scene_0.safetensors")).unwrap();
+    assert_eq!(grown.aabb().min.to_array(), [-3.0, -1.5, -2.0]);
+    assert_eq!(grown.aabb().max.to_array(), [3.0, 1.5, 1.0]);
 
     // Edit boxes are in the scene's coordinates too: this one is the cube's lower quarter in
     // x and y, and one reaching z = 1.5 leaves the cube.
