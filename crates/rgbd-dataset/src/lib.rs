@@ -92,6 +92,7 @@ use volrender::Camera;
 use crate::error::invalid;
 
 mod bounds;
+pub mod colmap;
 mod depth;
 mod error;
 mod io;
