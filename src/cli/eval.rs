@@ -182,10 +182,12 @@ fn print_report(e: &Evaluation) {
         "reconstruction_ssim:       {:.4}  (1 = identical)",
         e.reconstruction_ssim
     );
-    println!(
-        "reconstruction_depth_rmse: {:.4}  (world units; lower = closer)",
-        e.reconstruction_depth_rmse
-    );
+    match e.reconstruction_depth_rmse {
+        Some(rmse) => {
+            println!("reconstruction_depth_rmse: {rmse:.4}  (world units; lower = closer)")
+        }
+        None => println!("reconstruction_depth_rmse: none (the dataset has no depth maps)"),
+    }
     println!(
         "volume_psnr:               {:.2} dB  (V*'s volume on all {} training views, as `volgen \
          fit` scores its volumes)",
@@ -194,14 +196,16 @@ fn print_report(e: &Evaluation) {
     if let Some(psnr) = e.held_out_volume_psnr {
         println!("held_out_volume_psnr:      {psnr:.2} dB");
     }
-    match (e.held_out_psnr, e.held_out_ssim, e.held_out_depth_rmse) {
-        (Some(psnr), Some(ssim), Some(depth)) => {
+    match (e.held_out_psnr, e.held_out_ssim) {
+        (Some(psnr), Some(ssim)) => {
             println!(
                 "held_out_psnr:             {psnr:.2} dB  (V* on {} held-out views)",
                 e.held_out_views.len()
             );
             println!("held_out_ssim:             {ssim:.4}");
-            println!("held_out_depth_rmse:       {depth:.4}");
+            if let Some(depth) = e.held_out_depth_rmse {
+                println!("held_out_depth_rmse:       {depth:.4}");
+            }
         }
         _ => println!("held_out:                  none (train with --holdout N to measure)"),
     }
@@ -356,7 +360,7 @@ fn columns(e: &Evaluation) -> Vec<Column> {
     let mut columns = vec![
         (Some(e.reconstruction_psnr), None, 2),
         (Some(e.reconstruction_ssim), None, 4),
-        (Some(e.reconstruction_depth_rmse), None, 4),
+        (e.reconstruction_depth_rmse, None, 4),
         (Some(e.volume_psnr), None, 2),
         (e.held_out_psnr, None, 2),
         (e.held_out_ssim, None, 4),

@@ -135,6 +135,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let mut config = fit_config(args)?;
     let training_config = TrainConfig::preset("tiny")?;
     let dataset = load_dataset(&args.dataset, &training_config, args.depth_kind)?;
+    config.use_depth &= dataset.depth_kind() != DepthKind::None;
     if let Some(bounds) = scene_bounds(args.bounds.as_deref(), &dataset)? {
         config.aabb = bounds.cube();
     }

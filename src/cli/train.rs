@@ -270,6 +270,8 @@ fn fit_for_training(
 pub fn run(args: &TrainArgs) -> Result<()> {
     let mut config = args.options.config()?;
     let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
+    // Without depth maps the depth loss and the critics' depth channel have nothing to see.
+    config.ablations.use_depth &= dataset.depth_kind() != DepthKind::None;
     config.run.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
     let options = args.options.run_options(&config, &dataset, &args.out)?;
     if options.resume && args.out.is_dir() && !args.out.join(CHECKPOINT_FILE).exists() {
@@ -343,7 +345,12 @@ pub fn load_dataset(
     let dataset = Dataset::load_with(path, &options)
         .with_context(|| format!("loading the dataset {}", path.display()))?;
     let left_out = dataset.depth_left_out();
-    if left_out > 0 {
+    if dataset.depth_kind() == DepthKind::None {
+        eprintln!(
+            "{}: no depth maps (depth_kind none): training and fitting go without the depth loss",
+            path.display()
+        );
+    } else if left_out > 0 {
         eprintln!(
             "{}: {left_out} pixels with colour but no depth (depth_kind {}) are left out of the \
              depth loss",

@@ -30,12 +30,16 @@ pub enum DepthKind {
     Z,
     /// Ray length from the camera to the surface.
     Distance,
+    /// No depth maps (photos posed by structure from motion): frames need no
+    /// `depth_file_path`, and training and fitting go without the depth loss.
+    None,
 }
 
 /// The three kinds explained, for error messages that ask the user to choose.
 pub(super) const KINDS_EXPLAINED: &str = "\"expected\" (volgen's own: sum of weights times \
     ray distance, 0 where nothing is hit), \"z\" (planar: distance along the camera's viewing \
-    axis, as Blender's Z pass and most RGB-D sensors) or \"distance\" (ray length to the surface)";
+    axis, as Blender's Z pass and most RGB-D sensors), \"distance\" (ray length to the surface) or \"none\" \
+    (no depth maps: training goes without the depth loss)";
 
 impl DepthKind {
     /// The name as `transforms.json` and `--depth-kind` spell it.
@@ -45,6 +49,7 @@ impl DepthKind {
             Self::Expected => "expected",
             Self::Z => "z",
             Self::Distance => "distance",
+            Self::None => "none",
         }
     }
 }
@@ -63,6 +68,7 @@ impl FromStr for DepthKind {
             "expected" => Ok(Self::Expected),
             "z" => Ok(Self::Z),
             "distance" => Ok(Self::Distance),
+            "none" => Ok(Self::None),
             other => Err(format!(
                 "unknown depth kind \"{other}\": expected {KINDS_EXPLAINED}"
             )),
@@ -113,6 +119,17 @@ pub(super) fn to_expected(
 ) -> Result<Converted, String> {
     if let Some((i, bad)) = raw.iter().enumerate().find(|(_, d)| **d < 0.0) {
         return Err(format!("depth must not be negative, pixel {i} holds {bad}"));
+    }
+    if kind == DepthKind::None {
+        // Every pixel left out of the depth loss; nothing to refuse.
+        let foreground = opacity.iter().filter(|&&a| a > FOREGROUND_OPACITY).count();
+        return Ok(Converted {
+            depth: vec![0.0; opacity.len()],
+            mask: Some(vec![0.0; opacity.len()]),
+            left_out: opacity.iter().filter(|&&a| a > 0.0).count(),
+            foreground_holes: 0,
+            foreground,
+        });
     }
     if kind == DepthKind::Expected {
         if let Some(bad) = raw.iter().find(|d| !d.is_finite()) {

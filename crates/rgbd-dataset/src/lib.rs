@@ -33,7 +33,7 @@
 //! - `file_path`: the colour image, relative to the `transforms.json` directory; 8- or 16-bit
 //!   PNG, RGBA with straight (not premultiplied) alpha, or RGB (opaque). Without an extension
 //!   (Blender NeRF style) `.png` is appended when the bare name does not exist.
-//! - `depth_file_path` (required): a 16-bit grey PNG whose counts times the top-level
+//! - `depth_file_path` (required unless `depth_kind` is `"none"`): a 16-bit grey PNG whose counts times the top-level
 //!   `depth_scale` (world units per count, required for PNG depth: millimetre PNGs are 0.001)
 //!   give the depth, or an `.exr` file (single- or multi-part) whose channel `Z` or ending in `.Z`
 //!   (Blender's `ViewLayer.Depth.Z`), or else `Y`, or else `R`, holds depth in world units.
@@ -51,6 +51,10 @@
 //!     centre's ray and the viewing axis, it becomes ray distance, then as `"distance"`.
 //!   - `"distance"`: the ray length to the surface. Loading stores `alpha x distance`, the
 //!     expected depth of a surface covering the fraction alpha of the pixel.
+//!
+//!   - `"none"`: no depth maps (photos posed by structure from motion,
+//!     [`colmap`]): every pixel is left out of the depth loss, and `volgen train` and `fit` go
+//!     without it.
 //!
 //!   Under `"z"` and `"distance"` a value that is infinite, NaN, >= 1e9 (Blender writes 1e10),
 //!   65504 (half float's largest) or 0 says "no surface". Where alpha is 0 that is the

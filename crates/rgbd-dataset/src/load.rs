@@ -112,7 +112,16 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
                 ),
             ));
         }
-        let (depth_path, depth) = read_depth(frame, base, depth_scale, &at)?;
+        let (depth_path, depth) = if kind == DepthKind::None {
+            let none = Pixels {
+                width,
+                height,
+                data: vec![0.0; width * height],
+            };
+            (image_path.clone(), none)
+        } else {
+            read_depth(frame, base, depth_scale, &at)?
+        };
         if depth.width != width || depth.height != height {
             return Err(at.entry_error(format!(
                 "depth map is {} x {} pixels, but its image is {width} x {height}",

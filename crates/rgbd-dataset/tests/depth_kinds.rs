@@ -330,3 +330,36 @@ fn volgen_datasets_say_they_hold_expected_depth() {
     let data = Dataset::load(dir.path(), [1.0; 3]).unwrap();
     assert_eq!(data.depth_kind(), DepthKind::Expected);
 }
+
+/// Photos without depth maps (`depth_kind` none): frames need no depth file, every covered
+/// pixel is left out of the depth loss, colour and opacity load as usual; another kind still
+/// needs its files.
+#[test]
+fn a_dataset_without_depth_maps_loads_with_every_pixel_left_out() {
+    let dir = tempfile::tempdir().unwrap();
+    write_exr_dataset(dir.path(), Some("none"), &[2.0; W * H]);
+    // No depth file at all: the frame's `depth_file_path` names a file that is not there.
+    std::fs::remove_file(dir.path().join("depth/r_0.exr")).unwrap();
+    let root = json!({
+        "camera_angle_x": FOV_X,
+        "depth_kind": "none",
+        "frames": [{ "file_path": "r_0", "transform_matrix": c2w() }],
+    });
+    std::fs::write(dir.path().join("transforms.json"), root.to_string()).unwrap();
+    let data = load(dir.path(), None).unwrap();
+    assert_eq!(data.depth_kind(), DepthKind::None);
+    let covered = (0..W * H).filter(|&i| alpha_byte(i) > 0).count();
+    assert_eq!(data.depth_left_out(), covered);
+    let level = data.level(W, H, &Device::Cpu).unwrap();
+    assert!(values(&level.depths).iter().all(|&d| d == 0.0));
+    let mask = level.depth_mask.expect("every pixel is left out");
+    assert!(values(&mask).iter().all(|&m| m == 0.0));
+    let opacity = values(&level.opacity);
+    for (i, &a) in opacity.iter().enumerate() {
+        assert!((f64::from(a) - alpha(i)).abs() < 1e-6);
+    }
+    // Read as any kind with depth, the missing field is an error naming it.
+    let err = error(load(dir.path(), Some(DepthKind::Z)));
+    assert!(err.contains("depth_file_path"), "{err}");
+    assert_eq!("none".parse::<DepthKind>().unwrap(), DepthKind::None);
+}

@@ -30,7 +30,7 @@
 
 use candle_core::Tensor;
 use rand::SeedableRng;
-use rgbd_dataset::Dataset;
+use rgbd_dataset::{Dataset, DepthKind};
 use scene_metrics::{depth_rmse, mean_psnr, mean_ssim, InceptionBlock1};
 use serde::Serialize;
 
@@ -133,15 +133,16 @@ pub struct Evaluation {
     pub reconstruction_psnr: f64,
     /// 1 is a perfect reconstruction.
     pub reconstruction_ssim: f64,
-    /// World units, lower is better.
-    pub reconstruction_depth_rmse: f64,
+    /// World units, lower is better; None for a dataset without depth maps (`depth_kind`
+    /// none).
+    pub reconstruction_depth_rmse: Option<f64>,
     /// The held-out frames (empty without a holdout).
     pub held_out_views: Vec<String>,
     /// V* on the held-out views, dB.
     pub held_out_psnr: Option<f64>,
     /// V* on the held-out views.
     pub held_out_ssim: Option<f64>,
-    /// V* on the held-out views, world units.
+    /// V* on the held-out views, world units (None also without depth maps).
     pub held_out_depth_rmse: Option<f64>,
     /// dB: V* itself, the finest 3D scale's volume, rendered from every training view at the
     /// dataset's resolution as `volgen fit` measures its volumes, by the run's density rule
@@ -173,7 +174,7 @@ struct Reproduction {
     views: Vec<String>,
     psnr: f64,
     ssim: f64,
-    depth_rmse: f64,
+    depth_rmse: Option<f64>,
 }
 
 /// Every number of `model` against `dataset` (in the scene's own coordinates, as loaded; a run
@@ -304,7 +305,7 @@ pub fn evaluate(
         held_out_views: held.as_ref().map(|h| h.views.clone()).unwrap_or_default(),
         held_out_psnr: held.as_ref().map(|h| h.psnr),
         held_out_ssim: held.as_ref().map(|h| h.ssim),
-        held_out_depth_rmse: held.as_ref().map(|h| h.depth_rmse),
+        held_out_depth_rmse: held.as_ref().and_then(|h| h.depth_rmse),
         volume_psnr: training_volume_psnr,
         volume_views: training.len(),
         held_out_volume_psnr,
@@ -354,7 +355,9 @@ fn reproduction(
         views: chosen.frame_names().to_vec(),
         psnr: mean_psnr(&maps.rgb, &real)?,
         ssim: mean_ssim(&maps.rgb, &real)?,
-        depth_rmse: depth_rmse(&maps.depth, &coarse.depths)?,
+        depth_rmse: (dataset.depth_kind() != DepthKind::None)
+            .then(|| depth_rmse(&maps.depth, &coarse.depths))
+            .transpose()?,
     })
 }
 
