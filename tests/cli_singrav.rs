@@ -260,6 +260,52 @@ fn train_refuses_unknown_depth_and_takes_the_depth_kind_flag() {
     assert!(err.contains("planar") && err.contains("\"z\""), "{err}");
     ok(&train(&["--depth-kind", "expected", "--iterations", "2"]));
     assert!(run.join("checkpoint.safetensors").is_file());
+
+    // Photos without depth maps (what `volgen import colmap` writes): training goes without
+    // the depth loss and the critics' depth channel, and says so; eval has no depth RMSE.
+    for frame in root["frames"].as_array_mut().unwrap() {
+        frame.as_object_mut().unwrap().remove("depth_file_path");
+    }
+    root["depth_kind"] = "none".into();
+    std::fs::write(&transforms, root.to_string()).unwrap();
+    std::fs::remove_dir_all(data.join("depth")).unwrap();
+    std::fs::remove_dir_all(&run).unwrap();
+    let out = train(&["--iterations", "2"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && said.contains("no depth maps"),
+        "{said}"
+    );
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["ablations"]["use_depth"], false);
+    let text = ok(&volgen(&[
+        "eval",
+        path(&run),
+        "--dataset",
+        path(&data),
+        "--scenes",
+        "2",
+        "--views",
+        "2",
+        "--layout-reference",
+        "vstar",
+    ]));
+    assert!(text.contains("reconstruction_depth_rmse: none"), "{text}");
+    // `import colmap` names what is missing.
+    let err = failure(&volgen(&[
+        "import",
+        "colmap",
+        path(&tmp.path().join("sparse")),
+        "--images",
+        path(&data),
+        "--out",
+        path(&tmp.path().join("imported")),
+    ]));
+    assert!(
+        err.contains("cameras.txt") && err.contains("missing"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -14,6 +14,7 @@ mod export;
 mod extent;
 mod fit;
 mod harmonize;
+mod import;
 mod info;
 mod mesh;
 mod model_io;
@@ -45,6 +46,8 @@ enum Command {
     Fit(fit::FitArgs),
     /// Render a built-in scene (stones, mushrooms, islands) into an RGB-D transforms.json dataset.
     Scene(scene::SceneArgs),
+    /// Turn a capture of your own photos (a COLMAP reconstruction) into a dataset.
+    Import(import::ImportArgs),
     /// Train SinGRAV on a transforms.json RGB-D dataset (progress bar, log, checkpoints).
     Train(train::TrainArgs),
     /// Generate new scenes from a trained model: volumes, VDB/EXR on request, PNG views.
@@ -78,6 +81,7 @@ pub fn run() -> ExitCode {
         Command::Mesh(args) => mesh::run(&args),
         Command::Render(args) => render::run(&args),
         Command::Fit(args) => fit::run(&args),
+        Command::Import(args) => import::run(&args),
         Command::Scene(args) => scene::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),

@@ -3,7 +3,8 @@
 //! `.txt` (`colmap model_converter --output_type TXT`). [`ColmapModel::read`] reads either
 //! encoding; [`ColmapImage::camera_to_world`] turns COLMAP's world-to-camera poses (OpenCV axes:
 //! x right, y down, z forward) into the NeRF convention datasets use (x right, y up, looking
-//! down -z).
+//! down -z). [`import`] writes a reconstruction and its photos as a dataset (`volgen import
+//! colmap`).
 //!
 //! ```
 //! use rgbd_dataset::colmap::{CameraModel, ColmapModel};
@@ -25,7 +26,10 @@
 //! ```
 
 mod binary;
+mod import;
 mod text;
+
+pub use import::{import, ImportOptions, ImportSummary, Placement};
 
 use std::collections::BTreeMap;
 use std::fmt;

@@ -1,0 +1,338 @@
+//! A COLMAP reconstruction and its photos as a dataset volgen trains on: the capture turned
+//! upright, centred and scaled into the model's cube ([`Placement`]), each photo written as
+//! RGBA (its own alpha, or a mask image as alpha), and a `transforms.json` with per-frame
+//! intrinsics, `depth_kind` "none" and the placement recorded.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DMat3, DMat4, DVec3};
+use serde_json::json;
+
+use super::{model_error, CameraModel, ColmapCamera, ColmapModel};
+use crate::error::{invalid, io_error, Error, Result};
+use crate::io::{create_dir, write_bytes};
+
+/// Where the capture's points go: the central share of them (between these percentiles per
+/// axis) fills this much of the model's half side, so stray points far out do not shrink the
+/// scene and the scene's edges stay inside the cube.
+const POINT_PERCENTILES: (f64, f64) = (0.05, 0.95);
+const FILLED_HALF_SIDE: f64 = 0.9;
+
+/// The similarity from a capture's frame to the dataset's: `p' = scale * rotation * (p -
+/// centre)`. The rotation turns the cameras' mean up direction to +z (as nerfstudio's
+/// `orientation_method up` does); the centre and scale put the middle of the sparse points'
+/// central 90% box at the origin and its largest half side at 0.9.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    pub rotation: DMat3,
+    pub centre: DVec3,
+    pub scale: f64,
+}
+
+impl Placement {
+    /// The placement of `model`'s registered images and points. Errors without images or
+    /// points, or when the points' central box is a single point.
+    pub fn of(model: &ColmapModel) -> Result<Self> {
+        if model.images.is_empty() || model.points.is_empty() {
+            return Err(invalid(
+                "COLMAP model",
+                format!(
+                    "needs registered images and 3D points to place the scene, has {} images and \
+                     {} points",
+                    model.images.len(),
+                    model.points.len()
+                ),
+            ));
+        }
+        let up: DVec3 = model
+            .images
+            .iter()
+            .map(|image| image.camera_to_world().y_axis.truncate())
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let rotation = if up == DVec3::ZERO {
+            DMat3::IDENTITY
+        } else {
+            rotation_between(up, DVec3::Z)
+        };
+        let turned: Vec<DVec3> = model
+            .points
+            .iter()
+            .map(|p| rotation * DVec3::from(p.position))
+            .collect();
+        let (low, high) = central_box(&turned);
+        let half = 0.5 * (high - low);
+        if half.max_element() <= 0.0 {
+            return Err(invalid(
+                "COLMAP model",
+                "its points' central box has no extent: too few or identical points",
+            ));
+        }
+        Ok(Self {
+            rotation,
+            centre: rotation.transpose() * (0.5 * (low + high)),
+            scale: FILLED_HALF_SIDE / half.max_element(),
+        })
+    }
+
+    /// The placement as a 4x4 matrix acting on points.
+    pub fn matrix(&self) -> DMat4 {
+        DMat4::from_scale(DVec3::splat(self.scale))
+            * DMat4::from_mat3(self.rotation)
+            * DMat4::from_translation(-self.centre)
+    }
+
+    /// A camera-to-world matrix (rigid) of the capture as one of the dataset: rotated, its
+    /// centre placed; still rigid (the scale moves centres only).
+    pub fn place_camera(&self, c2w: DMat4) -> DMat4 {
+        let rotation = self.rotation * DMat3::from_mat4(c2w);
+        let centre = self.matrix().transform_point3(c2w.w_axis.truncate());
+        let mut placed = DMat4::from_mat3(rotation);
+        placed.w_axis = centre.extend(1.0);
+        placed
+    }
+}
+
+/// The rotation taking unit vector `from` to unit vector `to` (the shortest one; a half turn
+/// about x when they are opposite).
+fn rotation_between(from: DVec3, to: DVec3) -> DMat3 {
+    let axis = from.cross(to);
+    let cos = from.dot(to).clamp(-1.0, 1.0);
+    if axis.length() < 1e-12 {
+        return if cos > 0.0 {
+            DMat3::IDENTITY
+        } else {
+            DMat3::from_axis_angle(DVec3::X, std::f64::consts::PI)
+        };
+    }
+    DMat3::from_axis_angle(axis.normalize(), cos.acos())
+}
+
+/// Per axis the [`POINT_PERCENTILES`] of `points`.
+fn central_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    let mut low = DVec3::ZERO;
+    let mut high = DVec3::ZERO;
+    for axis in 0..3 {
+        let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        values.sort_by(f64::total_cmp);
+        let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
+        low[axis] = at(POINT_PERCENTILES.0);
+        high[axis] = at(POINT_PERCENTILES.1);
+    }
+    (low, high)
+}
+
+/// Where a capture's pictures are.
+#[derive(Debug, Clone)]
+pub struct ImportOptions {
+    /// The photos the reconstruction was made from (`colmap feature_extractor --image_path`).
+    pub images: PathBuf,
+    /// Masks of the foreground, one per photo with the photo's file name (PNG: `.png` appended
+    /// when the name has another extension), white on the scene, black elsewhere; `None`: the
+    /// photos' own alpha channel.
+    pub masks: Option<PathBuf>,
+}
+
+/// What [`import`] wrote.
+#[derive(Debug, Clone)]
+pub struct ImportSummary {
+    pub transforms: PathBuf,
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    pub placement: Placement,
+}
+
+/// Writes the reconstruction in `model_dir` ([`ColmapModel::read`]) with its photos as a
+/// dataset in `out`: `images/NNN.png` (RGBA) and `transforms.json` (written last), the scene
+/// placed in the model's cube ([`Placement`]). Cameras must be pinhole (`PINHOLE` or
+/// `SIMPLE_PINHOLE`, what `colmap image_undistorter` writes); other models are refused by name.
+/// Photos need a foreground: their alpha channel or `options.masks`; photos that are opaque
+/// everywhere with no masks are refused, since the model learns a bounded scene.
+pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<ImportSummary> {
+    let model = ColmapModel::read(model_dir)?;
+    let size = common_size(&model, model_dir)?;
+    let placement = Placement::of(&model)?;
+    create_dir(&out.join("images"))?;
+    let transforms_path = out.join("transforms.json");
+    radiance_volume::io::remove_file_if_exists(&transforms_path)?;
+    let mut frames = Vec::with_capacity(model.images.len());
+    let mut any_transparent = false;
+    for (i, image) in model.images.iter().enumerate() {
+        let camera = &model.cameras[&image.camera_id];
+        let [fx, fy, cx, cy] = pinhole(camera, model_dir)?;
+        let (rgba, transparent) = photo_with_alpha(&image.name, options, size)?;
+        any_transparent |= transparent;
+        let file = format!("images/{i:03}.png");
+        let mut bytes = Vec::new();
+        rgba.write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| invalid(file.clone(), e.to_string()))?;
+        write_bytes(&out.join(&file), &bytes)?;
+        let c2w = placement.place_camera(image.camera_to_world());
+        let rows: Vec<[f64; 4]> = (0..4).map(|r| c2w.row(r).to_array()).collect();
+        frames.push(json!({
+            "file_path": file,
+            "colmap_name": image.name,
+            "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy,
+            "transform_matrix": rows,
+        }));
+    }
+    if !any_transparent {
+        return Err(invalid(
+            "photos",
+            format!(
+                "every photo in {} is opaque everywhere and no --masks were given: volgen learns a \
+                 bounded scene and needs to know which pixels show it (an alpha channel, or mask \
+                 images white on the scene)",
+                options.images.display()
+            ),
+        ));
+    }
+    let matrix: Vec<[f64; 4]> = (0..4)
+        .map(|r| placement.matrix().row(r).to_array())
+        .collect();
+    let root = json!({
+        "w": size.0,
+        "h": size.1,
+        "depth_kind": "none",
+        "volgen_import": {
+            "from": "colmap",
+            "model": model_dir.display().to_string(),
+            "capture_to_dataset": matrix,
+            "scale": placement.scale,
+        },
+        "frames": frames,
+    });
+    let text = serde_json::to_string_pretty(&root)
+        .map_err(|e| invalid("transforms.json", e.to_string()))?;
+    write_bytes(&transforms_path, text.as_bytes())?;
+    Ok(ImportSummary {
+        transforms: transforms_path,
+        frames: model.images.len(),
+        width: size.0,
+        height: size.1,
+        placement,
+    })
+}
+
+/// The one image size every camera of the model has (a dataset's images share one size).
+fn common_size(model: &ColmapModel, dir: &Path) -> Result<(u32, u32)> {
+    let mut sizes = model.images.iter().map(|image| {
+        let camera = &model.cameras[&image.camera_id];
+        (camera.width, camera.height)
+    });
+    let Some(first) = sizes.next() else {
+        return Err(model_error(dir.to_path_buf(), "no registered images"));
+    };
+    if let Some(other) = sizes.find(|&s| s != first) {
+        return Err(model_error(
+            dir.to_path_buf(),
+            format!(
+                "the cameras have different image sizes ({} x {} and {} x {}); a dataset's images \
+                 share one size: resize the photos to one size before the reconstruction",
+                first.0, first.1, other.0, other.1
+            ),
+        ));
+    }
+    let fit = |v: u64| u32::try_from(v).ok().filter(|&v| v > 0);
+    match (fit(first.0), fit(first.1)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(model_error(
+            dir.to_path_buf(),
+            format!(
+                "camera size {} x {} is not a picture size",
+                first.0, first.1
+            ),
+        )),
+    }
+}
+
+/// `fx, fy, cx, cy` of a pinhole camera; other models are refused naming the model.
+fn pinhole(camera: &ColmapCamera, dir: &Path) -> Result<[f64; 4]> {
+    let p = &camera.params;
+    match camera.model {
+        CameraModel::SimplePinhole => Ok([p[0], p[0], p[1], p[2]]),
+        CameraModel::Pinhole => Ok([p[0], p[1], p[2], p[3]]),
+        other => Err(model_error(
+            dir.to_path_buf(),
+            format!(
+                "camera {} is {other}, a model with lens distortion: undistort the photos first \
+                 (`colmap image_undistorter --image_path IMAGES --input_path SPARSE --output_path \
+                 UNDISTORTED` writes PINHOLE cameras and the undistorted photos), then import \
+                 UNDISTORTED/sparse with --images UNDISTORTED/images",
+                camera.id
+            ),
+        )),
+    }
+}
+
+/// The photo `name` as RGBA: its alpha, or the mask's grey as alpha; and whether any pixel is
+/// not opaque.
+fn photo_with_alpha(
+    name: &str,
+    options: &ImportOptions,
+    (width, height): (u32, u32),
+) -> Result<(image::RgbaImage, bool)> {
+    let path = options.images.join(name);
+    let photo = image::open(&path).map_err(|e| photo_error(&path, e.to_string()))?;
+    if (photo.width(), photo.height()) != (width, height) {
+        return Err(photo_error(
+            &path,
+            format!(
+                "is {} x {} pixels, its camera {width} x {height}",
+                photo.width(),
+                photo.height()
+            ),
+        ));
+    }
+    let mut rgba = photo.to_rgba8();
+    if let Some(masks) = &options.masks {
+        let mask_path = mask_file(masks, name);
+        let mask = image::open(&mask_path)
+            .map_err(|e| photo_error(&mask_path, e.to_string()))?
+            .to_luma8();
+        if mask.dimensions() != (width, height) {
+            return Err(photo_error(
+                &mask_path,
+                format!(
+                    "is {} x {} pixels, its photo {width} x {height}",
+                    mask.width(),
+                    mask.height()
+                ),
+            ));
+        }
+        for (pixel, m) in rgba.pixels_mut().zip(mask.pixels()) {
+            pixel[3] = m[0];
+        }
+    }
+    let transparent = rgba.pixels().any(|p| p[3] < u8::MAX);
+    Ok((rgba, transparent))
+}
+
+/// The mask of photo `name`: the same name in `masks`, or with `.png` appended or put in place of
+/// its extension (nerfstudio's masks are PNG whatever the photos are).
+fn mask_file(masks: &Path, name: &str) -> PathBuf {
+    let same = masks.join(name);
+    if same.is_file() {
+        return same;
+    }
+    let replaced = masks.join(Path::new(name).with_extension("png"));
+    if replaced.is_file() {
+        return replaced;
+    }
+    masks.join(format!("{name}.png"))
+}
+
+fn photo_error(path: &Path, why: String) -> Error {
+    match std::fs::metadata(path) {
+        Err(e) => io_error(path)(e),
+        Ok(_) => Error::Dataset {
+            path: path.to_path_buf(),
+            frame: None,
+            why,
+        },
+    }
+}

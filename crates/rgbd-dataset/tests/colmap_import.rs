@@ -1,0 +1,224 @@
+//! A COLMAP reconstruction made by hand from a built-in scene's dataset, in a frame of its own
+//! (turned, scaled and moved, as structure from motion leaves it), imported back: the cameras
+//! come back up to a similarity with the scene upright and the points in the cube, the photos
+//! pixel for pixel, masks become alpha, and what cannot be imported is refused by name.
+
+use std::path::Path;
+
+use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
+use rgbd_dataset::colmap::{import, ImportOptions};
+use rgbd_dataset::scenes::StandingStones;
+use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
+
+const SIZE: usize = 24;
+
+/// The capture's frame: `p_colmap = SCALE * turn * p + SHIFT`.
+const SCALE: f64 = 2.5;
+const SHIFT: DVec3 = DVec3::new(3.0, -1.0, 2.0);
+fn turn() -> DMat3 {
+    DMat3::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7)
+}
+
+fn to_f64(m: glam::Mat4) -> DMat4 {
+    DMat4::from_cols_array(&m.to_cols_array().map(f64::from))
+}
+
+/// Writes a text model of `data` (cameras moved into the capture's frame; points where the
+/// depth maps put the surface, every 7th covered pixel of each view) into `dir`, with the
+/// camera model line `camera`.
+fn write_model(data: &Dataset, dir: &Path, camera: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("cameras.txt"), format!("{camera}\n")).unwrap();
+    let mut images = String::new();
+    for (i, (cam, name)) in data.cameras().iter().zip(data.frame_names()).enumerate() {
+        let c2w = to_f64(cam.c2w);
+        // NeRF axes (y up, looking down -z) to COLMAP's (y down, z forward), in the capture's
+        // frame.
+        let rotation =
+            turn() * DMat3::from_mat4(c2w) * DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0));
+        let centre = SCALE * (turn() * c2w.w_axis.truncate()) + SHIFT;
+        let w2c = rotation.transpose();
+        let t = -(w2c * centre);
+        let q = DQuat::from_mat3(&w2c);
+        images += &format!(
+            "{} {} {} {} {} {} {} {} 1 {name}\n\n",
+            i + 1,
+            q.w,
+            q.x,
+            q.y,
+            q.z,
+            t.x,
+            t.y,
+            t.z
+        );
+    }
+    std::fs::write(dir.join("images.txt"), images).unwrap();
+    let level = data.level(SIZE, SIZE, &candle_core::Device::Cpu).unwrap();
+    let depths: Vec<f32> = level.depths.flatten_all().unwrap().to_vec1().unwrap();
+    let alphas: Vec<f32> = level.opacity.flatten_all().unwrap().to_vec1().unwrap();
+    let mut points = String::new();
+    let mut id = 0;
+    for (v, cam) in data.cameras().iter().enumerate() {
+        for pixel in (0..SIZE * SIZE).step_by(7) {
+            let at = v * SIZE * SIZE + pixel;
+            if alphas[at] < 0.99 {
+                continue;
+            }
+            let (row, col) = ((pixel / SIZE) as f32 + 0.5, (pixel % SIZE) as f32 + 0.5);
+            let (origin, dir) = cam.ray(row, col);
+            let p: Vec3 = origin + dir * depths[at];
+            let p = SCALE * (turn() * p.as_dvec3()) + SHIFT;
+            id += 1;
+            points += &format!("{id} {} {} {} 128 128 128 0.5 1 0 2 0\n", p.x, p.y, p.z);
+        }
+    }
+    std::fs::write(dir.join("points3D.txt"), points).unwrap();
+}
+
+fn dataset(dir: &Path) -> Dataset {
+    let spec = DatasetSpec {
+        views: 6,
+        resolution: SIZE,
+        grid: 24,
+        seed: 3,
+    };
+    write_dataset(&StandingStones::new(3), dir, &spec).unwrap();
+    Dataset::load(dir, [1.0; 3]).unwrap()
+}
+
+fn pinhole(data: &Dataset) -> String {
+    let c = &data.cameras()[0];
+    format!(
+        "1 PINHOLE {SIZE} {SIZE} {} {} {} {}",
+        c.fx, c.fy, c.cx, c.cy
+    )
+}
+
+#[test]
+fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let model = tmp.path().join("sparse");
+    write_model(&data, &model, &pinhole(&data));
+    let options = ImportOptions {
+        images: tmp.path().join("data"),
+        masks: None,
+    };
+    let out = tmp.path().join("imported");
+    let summary = import(&model, &options, &out).unwrap();
+    assert_eq!(summary.frames, data.len());
+    let imported = Dataset::load(&out, [1.0; 3]).unwrap();
+    assert_eq!(imported.depth_kind(), DepthKind::None);
+
+    let (a, b) = (data.cameras(), imported.cameras());
+    // One rotation takes every original camera to its imported one, and it keeps +z up within
+    // a few degrees (the cameras' mean up is the scene's up).
+    let map = |i: usize| {
+        DMat3::from_mat4(to_f64(b[i].c2w)) * DMat3::from_mat4(to_f64(a[i].c2w)).transpose()
+    };
+    for i in 1..a.len() {
+        let diff = map(i) * map(0).transpose();
+        let angle = DQuat::from_mat3(&diff).angle_between(DQuat::IDENTITY);
+        assert!(angle < 1e-4, "camera {i}: rotations differ by {angle} rad");
+    }
+    let up = map(0) * DVec3::Z;
+    assert!(up.angle_between(DVec3::Z).to_degrees() < 15.0, "{up}");
+    // Distances between camera centres scale by one factor: the capture's times the import's.
+    let centre = |c: &volrender::Camera| c.position().as_dvec3();
+    let factor = SCALE * summary.placement.scale;
+    for i in 0..a.len() {
+        for j in 0..i {
+            let (da, db) = (centre(&a[i]) - centre(&a[j]), centre(&b[i]) - centre(&b[j]));
+            assert!((db.length() / da.length() - factor).abs() < 1e-4 * factor);
+        }
+    }
+    // The intrinsics and the photos come back as they were.
+    for (ca, cb) in a.iter().zip(b) {
+        assert!((ca.fx - cb.fx).abs() < 1e-3 && (ca.cx - cb.cx).abs() < 1e-4);
+    }
+    let pixels = |d: &Dataset| -> Vec<f32> {
+        let level = d.level(SIZE, SIZE, &candle_core::Device::Cpu).unwrap();
+        let mut v: Vec<f32> = level.images.flatten_all().unwrap().to_vec1().unwrap();
+        v.extend(
+            level
+                .opacity
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap(),
+        );
+        v
+    };
+    assert_eq!(pixels(&data), pixels(&imported));
+    // The surface points land in the cube: the scene's middle near the origin.
+    let placed_centre = summary.placement.matrix().transform_point3(SHIFT);
+    assert!(placed_centre.length() < 0.5, "{placed_centre}");
+}
+
+#[test]
+fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let model = tmp.path().join("sparse");
+    write_model(&data, &model, &pinhole(&data));
+    // The photos as a camera takes them: RGB, opaque; their alpha as separate masks.
+    let photos = tmp.path().join("photos");
+    let masks = tmp.path().join("masks");
+    for name in data.frame_names() {
+        let rgba = image::open(tmp.path().join("data").join(name))
+            .unwrap()
+            .to_rgba8();
+        let rgb = image::DynamicImage::ImageRgba8(rgba.clone()).to_rgb8();
+        let mask = image::GrayImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+            image::Luma([rgba.get_pixel(x, y)[3]])
+        });
+        for (dir, save) in [(&photos, 0), (&masks, 1)] {
+            let file = dir.join(name);
+            std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+            match save {
+                0 => rgb.save(&file).unwrap(),
+                _ => mask.save(&file).unwrap(),
+            }
+        }
+    }
+    let out = tmp.path().join("imported");
+    let without = ImportOptions {
+        images: photos.clone(),
+        masks: None,
+    };
+    let err = import(&model, &without, &out).unwrap_err().to_string();
+    assert!(err.contains("opaque") && err.contains("masks"), "{err}");
+    let with = ImportOptions {
+        images: photos,
+        masks: Some(masks),
+    };
+    import(&model, &with, &out).unwrap();
+    let opacity = |d: &Dataset| -> Vec<f32> {
+        let level = d.level(SIZE, SIZE, &candle_core::Device::Cpu).unwrap();
+        level.opacity.flatten_all().unwrap().to_vec1().unwrap()
+    };
+    assert_eq!(
+        opacity(&data),
+        opacity(&Dataset::load(&out, [1.0; 3]).unwrap())
+    );
+
+    // A camera with lens distortion: refused, naming the model and the way out.
+    write_model(
+        &data,
+        &model,
+        &format!("1 OPENCV {SIZE} {SIZE} 20 20 12 12 0.1 0 0 0"),
+    );
+    let err = import(&model, &with, &out).unwrap_err().to_string();
+    assert!(
+        err.contains("OPENCV") && err.contains("image_undistorter"),
+        "{err}"
+    );
+    // A missing photo names its file.
+    let elsewhere = ImportOptions {
+        images: tmp.path().join("nowhere"),
+        masks: None,
+    };
+    write_model(&data, &model, &pinhole(&data));
+    let err = import(&model, &elsewhere, &out).unwrap_err().to_string();
+    assert!(err.contains("nowhere"), "{err}");
+}

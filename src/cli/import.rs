@@ -1,0 +1,70 @@
+//! `volgen import colmap SPARSE_DIR --images DIR --out DATASET [--masks DIR]`: a COLMAP
+//! reconstruction of your own photos as a dataset `train` and `fit` read (no depth maps: they go
+//! without the depth loss).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use rgbd_dataset::colmap::{import, ImportOptions};
+
+/// Arguments of `volgen import`.
+#[derive(Debug, clap::Args)]
+pub struct ImportArgs {
+    #[command(subcommand)]
+    source: Source,
+}
+
+/// Where the capture comes from.
+#[derive(Debug, clap::Subcommand)]
+enum Source {
+    /// A COLMAP sparse model (`colmap mapper`'s output, e.g. sparse/0: cameras, images and
+    /// points3D as .bin or .txt) with pinhole cameras (`colmap image_undistorter` writes them).
+    Colmap(ColmapArgs),
+}
+
+/// Arguments of `volgen import colmap`.
+#[derive(Debug, clap::Args)]
+struct ColmapArgs {
+    /// The sparse model's directory.
+    sparse: PathBuf,
+    /// The photos the model was made from (names as in its images file).
+    #[arg(long, value_name = "DIR")]
+    images: PathBuf,
+    /// Foreground masks, one per photo with its name (or its name as .png), white on the
+    /// scene; without them the photos' alpha channel is the foreground.
+    #[arg(long, value_name = "DIR")]
+    masks: Option<PathBuf>,
+    /// The dataset directory to write (images/, transforms.json).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+/// Imports the capture and says where it went and how it was placed.
+pub fn run(args: &ImportArgs) -> Result<()> {
+    let Source::Colmap(args) = &args.source;
+    let options = ImportOptions {
+        images: args.images.clone(),
+        masks: args.masks.clone(),
+    };
+    let summary = import(&args.sparse, &options, &args.out)
+        .with_context(|| format!("importing the COLMAP model {}", args.sparse.display()))?;
+    let p = summary.placement;
+    let up = p.rotation.transpose() * glam::DVec3::Z;
+    println!(
+        "wrote {} photos at {} x {} (no depth maps): {}",
+        summary.frames,
+        summary.width,
+        summary.height,
+        summary.transforms.display()
+    );
+    println!(
+        "placed the capture in the model's cube: up was ({:.3}, {:.3}, {:.3}) (the cameras' mean), \
+         centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the points' central 90% fill 0.9 of the half side)",
+        up.x, up.y, up.z, p.centre.x, p.centre.y, p.centre.z, p.scale
+    );
+    println!(
+        "next: volgen fit {0} --out fit.safetensors --holdout 10, or volgen train {0} --out runs/mine --preset tiny",
+        args.out.display()
+    );
+    Ok(())
+}
