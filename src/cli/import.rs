@@ -59,7 +59,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     );
     println!(
         "placed the capture in the model's cube: up was ({:.3}, {:.3}, {:.3}) (the cameras' mean), \
-         centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the points' central 90% fill 0.9 of the half side)",
+         centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the points' central 98% fill 1 / 1.1 of the half side)",
         up.x, up.y, up.z, p.centre.x, p.centre.y, p.centre.z, p.scale
     );
     println!(

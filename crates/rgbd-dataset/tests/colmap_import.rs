@@ -25,8 +25,8 @@ fn to_f64(m: glam::Mat4) -> DMat4 {
 
 /// Writes a text model of `data` (cameras moved into the capture's frame; points where the
 /// depth maps put the surface, every 7th covered pixel of each view) into `dir`, with the
-/// camera model line `camera`.
-fn write_model(data: &Dataset, dir: &Path, camera: &str) {
+/// camera model line `camera`. Returns the points, in the capture's frame.
+fn write_model(data: &Dataset, dir: &Path, camera: &str) -> Vec<DVec3> {
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("cameras.txt"), format!("{camera}\n")).unwrap();
     let mut images = String::new();
@@ -57,6 +57,7 @@ fn write_model(data: &Dataset, dir: &Path, camera: &str) {
     let depths: Vec<f32> = level.depths.flatten_all().unwrap().to_vec1().unwrap();
     let alphas: Vec<f32> = level.opacity.flatten_all().unwrap().to_vec1().unwrap();
     let mut points = String::new();
+    let mut placed = Vec::new();
     let mut id = 0;
     for (v, cam) in data.cameras().iter().enumerate() {
         for pixel in (0..SIZE * SIZE).step_by(7) {
@@ -68,11 +69,13 @@ fn write_model(data: &Dataset, dir: &Path, camera: &str) {
             let (origin, dir) = cam.ray(row, col);
             let p: Vec3 = origin + dir * depths[at];
             let p = SCALE * (turn() * p.as_dvec3()) + SHIFT;
+            placed.push(p);
             id += 1;
             points += &format!("{id} {} {} {} 128 128 128 0.5 1 0 2 0\n", p.x, p.y, p.z);
         }
     }
     std::fs::write(dir.join("points3D.txt"), points).unwrap();
+    placed
 }
 
 fn dataset(dir: &Path) -> Dataset {
@@ -99,7 +102,7 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
     let tmp = tempfile::tempdir().unwrap();
     let data = dataset(&tmp.path().join("data"));
     let model = tmp.path().join("sparse");
-    write_model(&data, &model, &pinhole(&data));
+    let points = write_model(&data, &model, &pinhole(&data));
     let options = ImportOptions {
         images: tmp.path().join("data"),
         masks: None,
@@ -150,8 +153,19 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
         v
     };
     assert_eq!(pixels(&data), pixels(&imported));
-    // The surface points land in the cube: the scene's middle near the origin.
-    let placed_centre = summary.placement.matrix().transform_point3(SHIFT);
+    // Every surface point lands in the cube, the scene's middle near the origin, and the scene
+    // fills it: its widest side spans more than half the cube.
+    let m = summary.placement.matrix();
+    let placed: Vec<DVec3> = points.iter().map(|&p| m.transform_point3(p)).collect();
+    assert!(
+        placed.iter().all(|p| p.abs().max_element() <= 1.0),
+        "a point outside the cube"
+    );
+    let (low, high) = placed
+        .iter()
+        .fold((DVec3::MAX, DVec3::MIN), |(l, h), &p| (l.min(p), h.max(p)));
+    assert!((high - low).max_element() > 1.0, "{low} {high}");
+    let placed_centre = m.transform_point3(SHIFT);
     assert!(placed_centre.length() < 0.5, "{placed_centre}");
 }
 

@@ -12,16 +12,21 @@ use super::{model_error, CameraModel, ColmapCamera, ColmapModel};
 use crate::error::{invalid, io_error, Error, Result};
 use crate::io::{create_dir, write_bytes};
 
-/// Where the capture's points go: the central share of them (between these percentiles per
-/// axis) fills this much of the model's half side, so stray points far out do not shrink the
-/// scene and the scene's edges stay inside the cube.
-const POINT_PERCENTILES: (f64, f64) = (0.05, 0.95);
-const FILLED_HALF_SIDE: f64 = 0.9;
+/// Where the capture's points go: all but the outermost 1% on each side per axis (between
+/// these percentiles) fill this much of the model's half side, as `--bounds auto` places a scene
+/// from its depth maps (1st to 99th percentile, 5% margin each side): stray points far out do
+/// not shrink the scene, and its edges stay inside the cube. (The 5th to 95th percentiles filling
+/// 0.9 cut off the ground of a Blender scene: a fit of its views reached 18.4 dB.)
+const POINT_PERCENTILES: (f64, f64) = (0.01, 0.99);
+const FILLED_HALF_SIDE: f64 = 1.0 / 1.1;
 
 /// The similarity from a capture's frame to the dataset's: `p' = scale * rotation * (p -
 /// centre)`. The rotation turns the cameras' mean up direction to +z (as nerfstudio's
-/// `orientation_method up` does); the centre and scale put the middle of the sparse points'
-/// central 90% box at the origin and its largest half side at 0.9.
+/// `orientation_method up` does); the centre and scale put the middle of the scene's box at the
+/// origin and its largest half side at 1 / 1.1 of the cube's, as `--bounds auto` places a scene
+/// from its depth maps. The scene's box is the box of the foreground's visual hull when the
+/// photos' foreground is known ([`Placement::of_foreground`]), else the sparse points' central
+/// 98% ([`Placement::of`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
     pub rotation: DMat3,
@@ -30,42 +35,50 @@ pub struct Placement {
 }
 
 impl Placement {
-    /// The placement of `model`'s registered images and points. Errors without images or
-    /// points, or when the points' central box is a single point.
+    /// The placement of `model`'s registered images and points, the box from the points. Errors
+    /// without images or points, or when the points' box is a single point.
     pub fn of(model: &ColmapModel) -> Result<Self> {
-        if model.images.is_empty() || model.points.is_empty() {
-            return Err(invalid(
-                "COLMAP model",
-                format!(
-                    "needs registered images and 3D points to place the scene, has {} images and \
-                     {} points",
-                    model.images.len(),
-                    model.points.len()
-                ),
-            ));
-        }
-        let up: DVec3 = model
-            .images
-            .iter()
-            .map(|image| image.camera_to_world().y_axis.truncate())
-            .sum::<DVec3>()
-            .normalize_or_zero();
-        let rotation = if up == DVec3::ZERO {
-            DMat3::IDENTITY
-        } else {
-            rotation_between(up, DVec3::Z)
+        let rotation = upright(model)?;
+        let (low, high) = points_box(model, rotation);
+        Self::around(rotation, (low, high))
+    }
+
+    /// The placement with the box of the foreground's visual hull: the points of space that
+    /// every photo seeing them shows as foreground (`alpha[i]`, one per registered image, in
+    /// order: opacity bytes row-major at the camera's size, above half counts). Sparse points
+    /// miss the parts of a scene where few features are found (a plain ground's far edges, seen
+    /// obliquely); the masks do not. The hull bounds the scene across (x and y after turning it
+    /// upright), searched on a grid over twice the points' box across and between their lowest
+    /// and highest up and down, among the grid points at least half the photos frame; up and
+    /// down the points' box bounds it (photos from around and above carve neither under the
+    /// ground nor far above it).
+    pub fn of_foreground(model: &ColmapModel, alpha: &[Vec<u8>]) -> Result<Self> {
+        let rotation = upright(model)?;
+        let (low, high) = points_box(model, rotation);
+        // Across, the hull; up and down, the points: photos from around and above carve the
+        // sides well, but not below the ground (which hides it: the hull there spreads wider
+        // than the ground) nor far above it. So the hull is searched over twice the points' box
+        // across, between their lowest and highest up and down.
+        let (centre, half) = (0.5 * (low + high), (high - low).max(DVec3::splat(1e-9)));
+        let search = (
+            DVec3::new(centre.x - half.x, centre.y - half.y, low.z),
+            DVec3::new(centre.x + half.x, centre.y + half.y, high.z),
+        );
+        let Some((hull_low, hull_high)) = hull_box(model, alpha, rotation, search) else {
+            return Self::around(rotation, (low, high));
         };
-        let turned: Vec<DVec3> = model
-            .points
-            .iter()
-            .map(|p| rotation * DVec3::from(p.position))
-            .collect();
-        let (low, high) = central_box(&turned);
+        let low = DVec3::new(hull_low.x, hull_low.y, low.z);
+        let high = DVec3::new(hull_high.x, hull_high.y, high.z);
+        Self::around(rotation, (low, high))
+    }
+
+    /// Centres and scales the box `(low, high)` of the turned frame.
+    fn around(rotation: DMat3, (low, high): (DVec3, DVec3)) -> Result<Self> {
         let half = 0.5 * (high - low);
         if half.max_element() <= 0.0 {
             return Err(invalid(
                 "COLMAP model",
-                "its points' central box has no extent: too few or identical points",
+                "the scene's box has no extent: too few or identical points",
             ));
         }
         Ok(Self {
@@ -106,6 +119,122 @@ fn rotation_between(from: DVec3, to: DVec3) -> DMat3 {
         };
     }
     DMat3::from_axis_angle(axis.normalize(), cos.acos())
+}
+
+/// The rotation turning the cameras' mean up direction to +z; errors without images or points.
+fn upright(model: &ColmapModel) -> Result<DMat3> {
+    if model.images.is_empty() || model.points.is_empty() {
+        return Err(invalid(
+            "COLMAP model",
+            format!(
+                "needs registered images and 3D points to place the scene, has {} images and {} \
+                 points",
+                model.images.len(),
+                model.points.len()
+            ),
+        ));
+    }
+    let up: DVec3 = model
+        .images
+        .iter()
+        .map(|image| image.camera_to_world().y_axis.truncate())
+        .sum::<DVec3>()
+        .normalize_or_zero();
+    Ok(if up == DVec3::ZERO {
+        DMat3::IDENTITY
+    } else {
+        rotation_between(up, DVec3::Z)
+    })
+}
+
+/// The box of the points turned by `rotation`, between the [`POINT_PERCENTILES`].
+fn points_box(model: &ColmapModel, rotation: DMat3) -> (DVec3, DVec3) {
+    let turned: Vec<DVec3> = model
+        .points
+        .iter()
+        .map(|p| rotation * DVec3::from(p.position))
+        .collect();
+    central_box(&turned)
+}
+
+/// Cells per axis of the grid the visual hull is searched on.
+const HULL_GRID: usize = 64;
+
+/// The box (in the turned frame) of the grid points of `search` that every photo framing them
+/// shows as foreground, and that at least half the photos (and two) frame; `None` when no point
+/// is kept.
+fn hull_box(
+    model: &ColmapModel,
+    alpha: &[Vec<u8>],
+    rotation: DMat3,
+    (low, high): (DVec3, DVec3),
+) -> Option<(DVec3, DVec3)> {
+    let views: Vec<MaskedView<'_>> = model
+        .images
+        .iter()
+        .zip(alpha)
+        .filter_map(|(image, mask)| {
+            let camera = &model.cameras[&image.camera_id];
+            Some(MaskedView {
+                rotation: image.world_to_camera_rotation(),
+                translation: DVec3::from(image.translation),
+                intrinsics: pinhole_params(camera)?,
+                size: (camera.width as usize, camera.height as usize),
+                alpha: mask,
+            })
+        })
+        .collect();
+    // A point of the scene is in most photos' frame; points that few photos frame are not
+    // carved by the others and would otherwise stay.
+    let min_framed = (views.len() / 2).max(2);
+    let step = (high - low) / HULL_GRID as f64;
+    let mut kept: Option<(DVec3, DVec3)> = None;
+    for k in 0..HULL_GRID {
+        for j in 0..HULL_GRID {
+            for i in 0..HULL_GRID {
+                let turned =
+                    low + step * DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
+                let world = rotation.transpose() * turned;
+                let mut framed = 0;
+                let inside = views.iter().all(|view| match view.shows(world) {
+                    None => true,
+                    Some(foreground) => {
+                        framed += 1;
+                        foreground
+                    }
+                });
+                if inside && framed >= min_framed {
+                    let (lo, hi) = kept.get_or_insert((turned, turned));
+                    *lo = lo.min(turned - 0.5 * step);
+                    *hi = hi.max(turned + 0.5 * step);
+                }
+            }
+        }
+    }
+    kept
+}
+
+/// A registered photo as the visual hull sees it: its pose, pinhole intrinsics and foreground.
+struct MaskedView<'a> {
+    rotation: DMat3,
+    translation: DVec3,
+    intrinsics: [f64; 4],
+    size: (usize, usize),
+    /// Opacity bytes, row-major.
+    alpha: &'a [u8],
+}
+
+impl MaskedView<'_> {
+    /// Whether the photo shows the world point as foreground (opacity above half), or `None`
+    /// when the point is behind the camera or outside the frame.
+    fn shows(&self, world: DVec3) -> Option<bool> {
+        let c = self.rotation * world + self.translation;
+        let [fx, fy, cx, cy] = self.intrinsics;
+        let (w, h) = self.size;
+        let (u, v) = (fx * c.x / c.z + cx, fy * c.y / c.z + cy);
+        let framed = c.z > 0.0 && u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64;
+        framed.then(|| self.alpha[v as usize * w + u as usize] > u8::MAX / 2)
+    }
 }
 
 /// Per axis the [`POINT_PERCENTILES`] of `points`.
@@ -152,17 +281,42 @@ pub struct ImportSummary {
 pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<ImportSummary> {
     let model = ColmapModel::read(model_dir)?;
     let size = common_size(&model, model_dir)?;
-    let placement = Placement::of(&model)?;
+    let intrinsics = model
+        .images
+        .iter()
+        .map(|image| pinhole(&model.cameras[&image.camera_id], model_dir))
+        .collect::<Result<Vec<_>>>()?;
+    let photos = model
+        .images
+        .iter()
+        .map(|image| photo_with_alpha(&image.name, options, size))
+        .collect::<Result<Vec<_>>>()?;
+    if photos
+        .iter()
+        .all(|photo| photo.pixels().all(|p| p[3] == u8::MAX))
+    {
+        return Err(invalid(
+            "photos",
+            format!(
+                "every photo in {} is opaque everywhere and no --masks were given: volgen learns a \
+                 bounded scene and needs to know which pixels show it (an alpha channel, or mask \
+                 images white on the scene)",
+                options.images.display()
+            ),
+        ));
+    }
+    let alpha: Vec<Vec<u8>> = photos
+        .iter()
+        .map(|photo| photo.pixels().map(|p| p[3]).collect())
+        .collect();
+    let placement = Placement::of_foreground(&model, &alpha)?;
     create_dir(&out.join("images"))?;
     let transforms_path = out.join("transforms.json");
     radiance_volume::io::remove_file_if_exists(&transforms_path)?;
     let mut frames = Vec::with_capacity(model.images.len());
-    let mut any_transparent = false;
-    for (i, image) in model.images.iter().enumerate() {
-        let camera = &model.cameras[&image.camera_id];
-        let [fx, fy, cx, cy] = pinhole(camera, model_dir)?;
-        let (rgba, transparent) = photo_with_alpha(&image.name, options, size)?;
-        any_transparent |= transparent;
+    for (i, ((image, rgba), [fx, fy, cx, cy])) in
+        model.images.iter().zip(&photos).zip(intrinsics).enumerate()
+    {
         let file = format!("images/{i:03}.png");
         let mut bytes = Vec::new();
         rgba.write_to(
@@ -179,17 +333,6 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
             "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy,
             "transform_matrix": rows,
         }));
-    }
-    if !any_transparent {
-        return Err(invalid(
-            "photos",
-            format!(
-                "every photo in {} is opaque everywhere and no --masks were given: volgen learns a \
-                 bounded scene and needs to know which pixels show it (an alpha channel, or mask \
-                 images white on the scene)",
-                options.images.display()
-            ),
-        ));
     }
     let matrix: Vec<[f64; 4]> = (0..4)
         .map(|r| placement.matrix().row(r).to_array())
@@ -250,13 +393,21 @@ fn common_size(model: &ColmapModel, dir: &Path) -> Result<(u32, u32)> {
     }
 }
 
-/// `fx, fy, cx, cy` of a pinhole camera; other models are refused naming the model.
-fn pinhole(camera: &ColmapCamera, dir: &Path) -> Result<[f64; 4]> {
+/// `fx, fy, cx, cy` of a pinhole camera, `None` for a model with distortion.
+fn pinhole_params(camera: &ColmapCamera) -> Option<[f64; 4]> {
     let p = &camera.params;
     match camera.model {
-        CameraModel::SimplePinhole => Ok([p[0], p[0], p[1], p[2]]),
-        CameraModel::Pinhole => Ok([p[0], p[1], p[2], p[3]]),
-        other => Err(model_error(
+        CameraModel::SimplePinhole => Some([p[0], p[0], p[1], p[2]]),
+        CameraModel::Pinhole => Some([p[0], p[1], p[2], p[3]]),
+        _ => None,
+    }
+}
+
+/// `fx, fy, cx, cy` of a pinhole camera; other models are refused naming the model.
+fn pinhole(camera: &ColmapCamera, dir: &Path) -> Result<[f64; 4]> {
+    match (pinhole_params(camera), camera.model) {
+        (Some(params), _) => Ok(params),
+        (None, other) => Err(model_error(
             dir.to_path_buf(),
             format!(
                 "camera {} is {other}, a model with lens distortion: undistort the photos first \
@@ -269,13 +420,12 @@ fn pinhole(camera: &ColmapCamera, dir: &Path) -> Result<[f64; 4]> {
     }
 }
 
-/// The photo `name` as RGBA: its alpha, or the mask's grey as alpha; and whether any pixel is
-/// not opaque.
+/// The photo `name` as RGBA: its alpha, or the mask's grey as alpha.
 fn photo_with_alpha(
     name: &str,
     options: &ImportOptions,
     (width, height): (u32, u32),
-) -> Result<(image::RgbaImage, bool)> {
+) -> Result<image::RgbaImage> {
     let path = options.images.join(name);
     let photo = image::open(&path).map_err(|e| photo_error(&path, e.to_string()))?;
     if (photo.width(), photo.height()) != (width, height) {
@@ -308,8 +458,7 @@ fn photo_with_alpha(
             pixel[3] = m[0];
         }
     }
-    let transparent = rgba.pixels().any(|p| p[3] < u8::MAX);
-    Ok((rgba, transparent))
+    Ok(rgba)
 }
 
 /// The mask of photo `name`: the same name in `masks`, or with `.png` appended or put in place of

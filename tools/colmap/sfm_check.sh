@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# Photos in through real structure from motion, end to end (docs/photos.md):
+#   1. build a textured scene with bpy (make_test_scene.py --textured) and render RGBA photos of
+#      it with export_dataset.py (its true poses and depth stay aside, for the checks only),
+#   2. COLMAP 3.8 on the photos alone: feature_extractor (one PINHOLE camera), exhaustive_matcher,
+#      mapper,
+#   3. volgen import colmap, then check the poses against Blender's up to a similarity
+#      (research example pose_alignment: median rotation error <= MAX_ROT degrees, median centre
+#      error <= MAX_CENTRE of the cameras' spread),
+#   4. volgen fit on the imported photos and on the same photos with Blender's true poses (no
+#      depth either way, held-out views every 10th): the imported fit's held-out PSNR must be within
+#      MARGIN_DB of the true one's,
+#   5. volgen train --preset micro on the imported dataset and volgen sample from it.
+# Minutes (mostly the two fits), so not in `cargo test`: run it by hand, or in CI when time allows.
+#
+#   tools/colmap/sfm_check.sh [WORKDIR]
+#
+# Needs Debian's colmap (apt-get install colmap) and bpy (../shared/validators/setup.sh).
+# Environment: PYTHON (the validators' venv), VOLGEN (cargo's release binary), VIEWS (40),
+# SIZE (192), MAX_ROT (2), MAX_CENTRE (0.03), MARGIN_DB (4).
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+work="${1:-$(mktemp -d)}"
+mkdir -p "$work"
+PYTHON="${PYTHON:-${VALIDATORS_VENV:-$HOME/.cache/vdb-exr-validators/venv}/bin/python}"
+VIEWS="${VIEWS:-40}"
+SIZE="${SIZE:-192}"
+MAX_ROT="${MAX_ROT:-2}"
+MAX_CENTRE="${MAX_CENTRE:-0.03}"
+MARGIN_DB="${MARGIN_DB:-4}"
+export QT_QPA_PLATFORM=offscreen
+
+(cd "$root" && cargo build --release --bin volgen && cargo build --release -p research --example pose_alignment)
+VOLGEN="${VOLGEN:-$root/target/release/volgen}"
+ALIGN="$root/target/release/examples/pose_alignment"
+
+echo "== scene and photos ($VIEWS views at $SIZE^2)"
+"$PYTHON" "$root/tools/blender/make_test_scene.py" "$work/scene.blend" --textured
+"$PYTHON" "$root/tools/blender/export_dataset.py" "$work/scene.blend" --out "$work/blender" \
+  --views "$VIEWS" --size "$SIZE" --samples 16 > "$work/export.log"
+
+echo "== COLMAP"
+rm -rf "$work/db.db" "$work/sparse" && mkdir -p "$work/sparse"
+colmap feature_extractor --database_path "$work/db.db" --image_path "$work/blender/images" \
+  --ImageReader.single_camera 1 --ImageReader.camera_model PINHOLE --SiftExtraction.use_gpu 0 > "$work/colmap.log" 2>&1
+colmap exhaustive_matcher --database_path "$work/db.db" --SiftMatching.use_gpu 0 >> "$work/colmap.log" 2>&1
+colmap mapper --database_path "$work/db.db" --image_path "$work/blender/images" --output_path "$work/sparse" >> "$work/colmap.log" 2>&1
+
+echo "== import and poses"
+"$VOLGEN" import colmap "$work/sparse/0" --images "$work/blender/images" --out "$work/imported"
+"$ALIGN" "$work/blender" "$work/imported" "$MAX_ROT" "$MAX_CENTRE"
+
+echo "== fits (true poses against COLMAP's, the same photos)"
+python3 - "$work" <<'PY'
+import json, os, sys
+work = sys.argv[1]
+imported = json.load(open(os.path.join(work, "imported/transforms.json")))
+order = [os.path.basename(f["colmap_name"]) for f in imported["frames"]]
+truth = json.load(open(os.path.join(work, "blender/transforms.json")))
+by_name = {os.path.basename(f["file_path"]): f for f in truth["frames"]}
+truth["frames"] = [by_name[n] for n in order]
+json.dump(truth, open(os.path.join(work, "blender/registered.json"), "w"))
+PY
+"$VOLGEN" fit "$work/blender/registered.json" --out "$work/fit_true.safetensors" --holdout 10 --no-depth --bounds auto | tail -2
+"$VOLGEN" fit "$work/imported" --out "$work/fit_imported.safetensors" --holdout 10 | tail -2
+python3 - "$work" "$MARGIN_DB" <<'PY'
+import json, sys
+work, margin = sys.argv[1], float(sys.argv[2])
+held = lambda name: json.load(open(f"{work}/{name}.fit.json"))["held_out_psnr"]
+true, imported = held("fit_true"), held("fit_imported")
+print(f"held-out PSNR: true poses {true:.2f} dB, COLMAP's {imported:.2f} dB")
+if imported < true - margin:
+    sys.exit(f"COLMAP's poses fit {true - imported:.2f} dB worse than the true ones (margin {margin} dB)")
+PY
+
+echo "== train micro and sample"
+"$VOLGEN" train "$work/imported" --out "$work/run" --preset micro --iterations 40 > "$work/train.log" 2>&1
+"$VOLGEN" sample "$work/run" --count 1 --out "$work/samples"
+echo "sfm check passed: $work"
