@@ -92,6 +92,17 @@ fn info_export_and_render_write_what_they_say() {
     assert!(renders.join("r_0.exr").is_file() && renders.join("r_0.png").is_file());
 }
 
+/// The first primitive of the first mesh of a glTF document: the one mesh volgen writes.
+fn first_primitive(document: &gltf::Document) -> gltf::Primitive<'_> {
+    document
+        .meshes()
+        .next()
+        .unwrap()
+        .primitives()
+        .next()
+        .unwrap()
+}
+
 #[test]
 fn mesh_writes_each_format_and_refuses_bad_input_by_name() {
     let dir = tempfile::tempdir().unwrap();
@@ -114,13 +125,7 @@ fn mesh_writes_each_format_and_refuses_bad_input_by_name() {
     }
     // The glTF as an independent reader sees it: a ball of radius 0.5 (y up in the file).
     let (document, buffers, _) = gltf::import(dir.path().join("meshes/ball.glb")).unwrap();
-    let primitive = document
-        .meshes()
-        .next()
-        .unwrap()
-        .primitives()
-        .next()
-        .unwrap();
+    let primitive = first_primitive(&document);
     let positions: Vec<[f32; 3]> = primitive
         .reader(|b| Some(&buffers[b.index()]))
         .read_positions()
@@ -146,16 +151,8 @@ fn mesh_writes_each_format_and_refuses_bad_input_by_name() {
     ]));
     assert!(text.contains("closed"), "{text}");
     let (document, _, _) = gltf::import(&light).unwrap();
-    let triangles = |document: &gltf::Document| -> usize {
-        let primitive = document
-            .meshes()
-            .next()
-            .unwrap()
-            .primitives()
-            .next()
-            .unwrap();
-        primitive.indices().unwrap().count() / 3
-    };
+    let triangles =
+        |document: &gltf::Document| first_primitive(document).indices().unwrap().count() / 3;
     let full = triangles(&gltf::import(dir.path().join("meshes/ball.glb")).unwrap().0);
     let quarter = triangles(&document);
     assert!(
