@@ -18,7 +18,9 @@ pub struct ImportArgs {
 #[derive(Debug, clap::Subcommand)]
 enum Source {
     /// A COLMAP sparse model (`colmap mapper`'s output, e.g. sparse/0: cameras, images and
-    /// points3D as .bin or .txt) with pinhole cameras (`colmap image_undistorter` writes them).
+    /// points3D as .bin or .txt). Photos of SIMPLE_RADIAL, RADIAL, OPENCV and OPENCV_FISHEYE
+    /// cameras are undistorted into pinhole ones; other lens models are refused (`colmap
+    /// image_undistorter` undistorts them).
     Colmap(ColmapArgs),
 }
 
@@ -57,9 +59,22 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         summary.height,
         summary.transforms.display()
     );
+    for camera in &summary.undistorted {
+        println!(
+            "undistorted the photos of camera {} ({}) into a pinhole camera: focal length {:.2} x {:.2} \
+             pixels (the photos' {:.2} x {:.2}), so that every pixel is seen",
+            camera.id,
+            camera.model,
+            camera.pinhole[0],
+            camera.pinhole[1],
+            camera.photo[0],
+            camera.photo[1]
+        );
+    }
     println!(
         "placed the capture in the model's cube: up was ({:.3}, {:.3}, {:.3}) (the cameras' mean), \
-         centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the points' central 98% fill 1 / 1.1 of the half side)",
+         centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the foreground's visual hull across and the \
+         sparse points up and down fill 1 / 1.1 of the half side)",
         up.x, up.y, up.z, p.centre.x, p.centre.y, p.centre.z, p.scale
     );
     println!(

@@ -6,7 +6,7 @@ use radiance_volume::Aabb;
 use serde::{Deserialize, Serialize};
 use volrender::Camera;
 
-use super::{Dataset, FramePixels};
+use super::{Dataset, DepthKind, FramePixels};
 use crate::error::{invalid, Result};
 
 /// The box a scene occupies, in the dataset's world coordinates.
@@ -167,6 +167,15 @@ impl Dataset {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn auto_bounds(&self) -> Result<SceneBounds> {
+        if self.depth_kind == DepthKind::None {
+            return Err(invalid(
+                "bounds",
+                "`auto` needs depth maps, and this dataset has none (`depth_kind` \"none\"): \
+                 give the scene's box xmin,ymin,zmin,xmax,ymax,zmax in the dataset's coordinates, \
+                 or import a COLMAP capture with `volgen import colmap`, which places the scene in \
+                 the model's cube from its sparse points and the photos' foreground",
+            ));
+        }
         let mut axes: [Vec<f32>; 3] = Default::default();
         for (camera, frame) in self.cameras.iter().zip(&self.frames) {
             for (i, (&a, &d)) in frame.opacity.iter().zip(&frame.depth).enumerate() {

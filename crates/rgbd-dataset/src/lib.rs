@@ -28,11 +28,15 @@
 //!   `cy` in pixels, as [`volrender::load_transforms`] reads them. `w` and `h` are optional; when
 //!   given, every image must have that size, otherwise all images must share the first one's.
 //! - `transform_matrix`: camera-to-world, row-major 4x4, NeRF/Blender convention (the camera looks
-//!   down its -Z axis, +Y up). It must be rigid: finite, rotation part orthonormal within 1e-3
-//!   with determinant +1, last row `[0, 0, 0, 1]`.
+//!   down its -Z axis, +Y up), or OpenCV's axes with `"camera_axes": "opencv"`. It must be rigid:
+//!   finite, rotation part orthonormal within 1e-3 with determinant +1, last row `[0, 0, 0, 1]`.
 //! - `file_path`: the colour image, relative to the `transforms.json` directory; 8- or 16-bit
-//!   PNG, RGBA with straight (not premultiplied) alpha, or RGB (opaque). Without an extension
-//!   (Blender NeRF style) `.png` is appended when the bare name does not exist.
+//!   PNG, RGBA with straight (not premultiplied) alpha, or RGB (opaque), or JPEG. Without an
+//!   extension (Blender NeRF style) `.png` is appended when the bare name does not exist.
+//! - nerfstudio's capture fields: `mask_path` (per frame, white on the scene; multiplies alpha)
+//!   and the lens, `camera_model` (`OPENCV`, the default, `OPENCV_FISHEYE`, `PINHOLE`) with `k1`
+//!   to `k4`, `p1`, `p2`: distorted photos are undistorted while loading ([`lens`]) into
+//!   pinhole cameras.
 //! - `depth_file_path` (required unless `depth_kind` is `"none"`): a 16-bit grey PNG whose counts times the top-level
 //!   `depth_scale` (world units per count, required for PNG depth: millimetre PNGs are 0.001)
 //!   give the depth, or an `.exr` file (single- or multi-part) whose channel `Z` or ending in `.Z`
@@ -54,7 +58,8 @@
 //!
 //!   - `"none"`: no depth maps (photos posed by structure from motion,
 //!     [`colmap`]): every pixel is left out of the depth loss, and `volgen train` and `fit` go
-//!     without it.
+//!     without it. A file with no `depth_kind` and no `depth_file_path` in any frame is read
+//!     as `"none"`.
 //!
 //!   Under `"z"` and `"distance"` a value that is infinite, NaN, >= 1e9 (Blender writes 1e10),
 //!   65504 (half float's largest) or 0 says "no surface". Where alpha is 0 that is the
@@ -64,8 +69,8 @@
 //!   see 0 there); when more than 5% of a view's foreground
 //!   (alpha > 0.5 + 1/255: an 8-bit PNG stores a renderer's exact 0.5 as 128/255) is left out,
 //!   loading fails naming the depth file and the count. Negative depth
-//!   is an error under every kind. A dataset without `depth_kind` and without the flag is refused
-//!   with an error that explains the three kinds: depth read as the wrong kind trains on silently
+//!   is an error under every kind. A dataset with depth maps but without `depth_kind` and
+//!   without the flag is refused with an error that explains the three kinds: depth read as the wrong kind trains on silently
 //!   wrong depth.
 //!
 //! Pixels relate to the renderer's premultiplied colour `C` and opacity `a` by `alpha = a` and
@@ -96,10 +101,12 @@ use volrender::Camera;
 use crate::error::invalid;
 
 mod bounds;
+mod capture;
 pub mod colmap;
 mod depth;
 mod error;
 mod io;
+pub mod lens;
 mod load;
 mod pixels;
 mod rendered;

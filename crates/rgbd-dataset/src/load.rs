@@ -7,8 +7,10 @@ use glam::{Mat3, Mat4};
 use serde_json::Value;
 use volrender::Camera;
 
+use super::capture::{frame_lens, mask_path};
 use super::depth::{to_expected, Converted, DepthKind, KINDS_EXPLAINED, MAX_HOLE_FRACTION};
-use super::pixels::{read_depth_exr, read_depth_png, read_rgba, Pixels};
+use super::lens::{Lens, Undistortion};
+use super::pixels::{read_depth_exr, read_depth_png, read_grey, read_rgba, Pixels};
 use super::source::{SceneSource, SOURCE_FIELD};
 use super::{transforms_file, Dataset, FramePixels, LoadOptions};
 use crate::error::{io_error, Error, Result};
@@ -59,8 +61,11 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
     if frames.is_empty() {
         return Err(file_error(&path, "no frames: `frames` is empty"));
     }
+    // A capture without a single depth map (nerfstudio's photos) has nothing to misread.
+    let no_depth_files = frames.iter().all(|f| f.get("depth_file_path").is_none());
     let kind = match options.depth_kind {
         Some(kind) => kind,
+        None if root.get("depth_kind").is_none() && no_depth_files => DepthKind::None,
         None => declared_depth_kind(&root, &path)?,
     };
     let depth_scale = match root.get("depth_scale") {
@@ -96,7 +101,17 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         let image_path = frame_path
             .map(|p| image_file(base, p))
             .ok_or_else(|| at.entry_error("missing field `file_path` (the colour image)"))?;
-        let rgba = read_rgba(&image_path).map_err(|why| file_problem(&at, &image_path, why))?;
+        let mut rgba = read_rgba(&image_path).map_err(|why| file_problem(&at, &image_path, why))?;
+        if let Some(mask) = mask_path(frame).map_err(|why| at.entry_error(why))? {
+            apply_mask(&mut rgba, &image_file(base, mask), &at)?;
+        }
+        let lens = frame_lens(&root, frame).map_err(|why| at.entry_error(why))?;
+        if !lens.is_pinhole() && kind != DepthKind::None {
+            return Err(at.entry_error(format!(
+                "the lens has distortion ({lens:?}) and the frame has a depth map: volgen \
+                 undistorts photos, not depth maps; undistort both first or leave the depth out"
+            )));
+        }
         let (width, height) = *size.get_or_insert((rgba.width, rgba.height));
         if (rgba.width, rgba.height) != (width, height) {
             let reference = if declared.is_some() {
@@ -128,20 +143,23 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
                 depth.width, depth.height
             )));
         }
-        raw.push((rgba, depth_path, depth.data));
+        raw.push((rgba, depth_path, depth.data, lens));
         names.push(at.name);
     }
     let (width, height) = size.unwrap_or_default();
-    let cameras: Vec<Camera> = volrender::load_transforms(&path, Some((width, height)))?
+    let mut cameras: Vec<Camera> = volrender::load_transforms(&path, Some((width, height)))?
         .into_iter()
         .map(|frame| frame.camera)
         .collect();
     let mut pixels = Vec::with_capacity(raw.len());
-    for (((rgba, depth_path, depth), camera), name) in raw.into_iter().zip(&cameras).zip(&names) {
+    for (((mut rgba, depth_path, depth, lens), camera), name) in
+        raw.into_iter().zip(&mut cameras).zip(&names)
+    {
         let at = FrameRef {
             transforms: &path,
             name: name.clone(),
         };
+        undistort(&mut rgba, camera, lens, &at)?;
         let opacity: Vec<f32> = rgba.data.iter().map(|p| p[3]).collect();
         let converted = to_expected(kind, &depth, &opacity, camera)
             .map_err(|why| at.error(&depth_path, format!("`depth_kind` {kind}: {why}")))?;
@@ -221,6 +239,45 @@ fn image_file(base: &Path, name: &str) -> PathBuf {
     } else {
         path
     }
+}
+
+/// Multiplies the photo's opacity by the mask in `file` (white on the scene).
+fn apply_mask(rgba: &mut Pixels<[f32; 4]>, file: &Path, at: &FrameRef<'_>) -> Result<()> {
+    let mask = read_grey(file).map_err(|why| file_problem(at, file, why))?;
+    if (mask.width, mask.height) != (rgba.width, rgba.height) {
+        return Err(at.error(
+            file,
+            format!(
+                "mask is {} x {} pixels, but its image is {} x {}",
+                mask.width, mask.height, rgba.width, rgba.height
+            ),
+        ));
+    }
+    for (pixel, m) in rgba.data.iter_mut().zip(mask.data) {
+        pixel[3] *= m;
+    }
+    Ok(())
+}
+
+/// Resamples a photo taken through `lens` into a pinhole camera ([`Undistortion`]) and makes
+/// `camera` that pinhole one.
+fn undistort(
+    rgba: &mut Pixels<[f32; 4]>,
+    camera: &mut Camera,
+    lens: Lens,
+    at: &FrameRef<'_>,
+) -> Result<()> {
+    if lens.is_pinhole() {
+        return Ok(());
+    }
+    let size = (camera.width as u32, camera.height as u32);
+    let photo = [camera.fx, camera.fy, camera.cx, camera.cy].map(f64::from);
+    let undistortion = Undistortion::new(lens, photo, size).map_err(|why| at.entry_error(why))?;
+    rgba.data = undistortion.apply_straight(&rgba.data);
+    let pinhole = undistortion.pinhole().map(|v| v as f32);
+    *camera = Camera::from_intrinsics(camera.c2w, camera.width, camera.height, pinhole)
+        .map_err(|e| at.entry_error(e.to_string()))?;
+    Ok(())
 }
 
 /// The error for an image or depth file that could not be read.

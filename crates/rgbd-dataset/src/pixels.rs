@@ -48,6 +48,22 @@ pub(super) fn read_rgba(path: &Path) -> Result<Pixels<[f32; 4]>, String> {
     })
 }
 
+/// Decodes a mask to grey in [0, 1] (colour masks by their luma).
+pub(super) fn read_grey(path: &Path) -> Result<Pixels<f32>, String> {
+    let image = decode(path)?;
+    let (width, height) = (image.width() as usize, image.height() as usize);
+    let data = image
+        .to_luma32f()
+        .pixels()
+        .map(|p| p.0[0].clamp(0.0, 1.0))
+        .collect();
+    Ok(Pixels {
+        width,
+        height,
+        data,
+    })
+}
+
 /// Decodes a 16-bit grey PNG depth map to its raw counts.
 pub(super) fn read_depth_png(path: &Path) -> Result<Pixels<u16>, String> {
     let (width, height, data) = match decode(path)? {

@@ -3,10 +3,15 @@
 //! come back up to a similarity with the scene upright and the points in the cube, the photos
 //! pixel for pixel, masks become alpha, and what cannot be imported is refused by name.
 
+mod common;
+
 use std::path::Path;
+
+use common::lens_photos;
 
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
 use rgbd_dataset::colmap::{import, ImportOptions};
+use rgbd_dataset::lens::{Lens, Undistortion};
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
 
@@ -216,15 +221,15 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
         opacity(&Dataset::load(&out, [1.0; 3]).unwrap())
     );
 
-    // A camera with lens distortion: refused, naming the model and the way out.
+    // A lens model volgen does not undistort: refused, naming the model and the way out.
     write_model(
         &data,
         &model,
-        &format!("1 OPENCV {SIZE} {SIZE} 20 20 12 12 0.1 0 0 0"),
+        &format!("1 FULL_OPENCV {SIZE} {SIZE} 20 20 12 12 0.1 0 0 0 0 0 0 0"),
     );
     let err = import(&model, &with, &out).unwrap_err().to_string();
     assert!(
-        err.contains("OPENCV") && err.contains("image_undistorter"),
+        err.contains("FULL_OPENCV") && err.contains("image_undistorter"),
         "{err}"
     );
     // A missing photo names its file.
@@ -235,4 +240,90 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
     write_model(&data, &model, &pinhole(&data));
     let err = import(&model, &elsewhere, &out).unwrap_err().to_string();
     assert!(err.contains("nowhere"), "{err}");
+}
+
+#[test]
+fn photos_through_a_distorting_lens_come_back_as_the_pinhole_saw_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = dataset(&tmp.path().join("data"));
+    let c = &data.cameras()[0];
+    let k = [c.fx, c.fy, c.cx, c.cy].map(f64::from);
+    // An OPENCV lens with strong barrel distortion (about two pixels at the corners).
+    let (k1, k2, p1, p2) = (-0.45, 0.1, 0.004, -0.003);
+    let lens = Lens::BrownConrady {
+        radial: [k1, k2, 0.0, 0.0],
+        tangential: [p1, p2],
+    };
+    let model = tmp.path().join("sparse");
+    write_model(
+        &data,
+        &model,
+        &format!(
+            "1 OPENCV {SIZE} {SIZE} {} {} {} {} {k1} {k2} {p1} {p2}",
+            k[0], k[1], k[2], k[3]
+        ),
+    );
+    // The photos as that lens takes them: each pixel shows what the pinhole's ray through its
+    // ideal point sees.
+    let photos = tmp.path().join("photos");
+    let mut pinhole_photos = Vec::new();
+    let mut distorted_photos = Vec::new();
+    for name in data.frame_names() {
+        let pinhole = image::open(tmp.path().join("data").join(name))
+            .unwrap()
+            .to_rgba8();
+        let distorted = lens_photos::through_lens(&pinhole, k, lens);
+        let file = photos.join(name);
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+        distorted.save(&file).unwrap();
+        pinhole_photos.push(pinhole);
+        distorted_photos.push(distorted);
+    }
+    let out = tmp.path().join("imported");
+    let options = ImportOptions {
+        images: photos,
+        masks: None,
+    };
+    import(&model, &options, &out).unwrap();
+    let imported = Dataset::load(&out, [1.0; 3]).unwrap();
+    // The imported cameras are the undistortion's pinhole: wider than the photo's focal length
+    // (barrel distortion squeezed more into the frame), the principal point kept.
+    let expected = Undistortion::new(lens, k, (SIZE as u32, SIZE as u32))
+        .unwrap()
+        .pinhole();
+    let b = &imported.cameras()[0];
+    assert!(expected[0] < k[0] * 0.99, "{expected:?} against {k:?}");
+    for (got, want) in [b.fx, b.fy, b.cx, b.cy].iter().zip(expected) {
+        assert!(
+            (f64::from(*got) - want).abs() < 1e-3,
+            "{got} against {want}"
+        );
+    }
+    // Each imported pixel shows what the pinhole photo shows along the same ray, far closer
+    // than the distorted photo read as if it were a pinhole one.
+    let mut undistorted_error = 0.0;
+    let mut ignored_error = 0.0;
+    for (v, name) in imported.frame_names().iter().enumerate() {
+        let got = image::open(out.join(name)).unwrap().to_rgba8();
+        for (i, j, pixel) in got.enumerate_pixels() {
+            let x = (f64::from(i) + 0.5 - expected[2]) / expected[0];
+            let y = (f64::from(j) + 0.5 - expected[3]) / expected[1];
+            let truth = lens_photos::sample(&pinhole_photos[v], k[0] * x + k[2], k[1] * y + k[3]);
+            let naive = distorted_photos[v].get_pixel(i, j);
+            let alpha = f64::from(pixel[3]) / 255.0;
+            let naive_alpha = f64::from(naive[3]) / 255.0;
+            for c in 0..3 {
+                undistorted_error += (f64::from(pixel[c]) * alpha - truth[c]).abs();
+                ignored_error += (f64::from(naive[c]) * naive_alpha - truth[c]).abs();
+            }
+            undistorted_error += (f64::from(pixel[3]) - truth[3]).abs();
+            ignored_error += (f64::from(naive[3]) - truth[3]).abs();
+        }
+    }
+    let values = (4 * SIZE * SIZE * imported.len()) as f64;
+    let (undistorted_error, ignored_error) = (undistorted_error / values, ignored_error / values);
+    assert!(
+        undistorted_error < 0.5 * ignored_error,
+        "mean error {undistorted_error:.2} levels undistorted, {ignored_error:.2} ignoring the lens"
+    );
 }

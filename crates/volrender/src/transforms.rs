@@ -3,7 +3,10 @@
 //! Intrinsics come from `camera_angle_x` (horizontal field of view, radians) or from `fl_x`
 //! (`fl_y` defaults to `fl_x`), `cx`, `cy` (default: the image centre) with the image size `w`,
 //! `h`; each may be given at the top level or per frame (a frame's value wins). Each frame needs
-//! a 4x4 row-major `transform_matrix` (camera-to-world, NeRF/Blender convention).
+//! a 4x4 row-major `transform_matrix` (camera-to-world). Its camera axes are the NeRF/Blender
+//! (OpenGL) convention, which nerfstudio also writes: x right, y up, looking down -z; with
+//! `"camera_axes": "opencv"` (top level or per frame) they are OpenCV's and COLMAP's instead:
+//! x right, y down, looking down +z.
 
 use std::path::Path;
 
@@ -77,6 +80,22 @@ fn number(root: &Value, frame: &Value, key: &str) -> std::result::Result<Option<
     }
 }
 
+/// The turn from the file's camera axes to the NeRF convention's, from `camera_axes`.
+fn camera_axes(root: &Value, frame: &Value) -> std::result::Result<Mat4, String> {
+    match frame.get("camera_axes").or_else(|| root.get("camera_axes")) {
+        None => Ok(Mat4::IDENTITY),
+        Some(Value::String(axes)) if axes == "opengl" => Ok(Mat4::IDENTITY),
+        // y and z turned around: OpenCV's y down and z forward become y up and z backward.
+        Some(Value::String(axes)) if axes == "opencv" => {
+            Ok(Mat4::from_scale(glam::Vec3::new(1.0, -1.0, -1.0)))
+        }
+        Some(other) => Err(format!(
+            "field `camera_axes` must be \"opengl\" (NeRF, Blender, nerfstudio: y up, looking \
+             down -z) or \"opencv\" (COLMAP: y down, looking down +z), got {other}"
+        )),
+    }
+}
+
 fn parse_frame(
     root: &Value,
     frame: &Value,
@@ -100,7 +119,7 @@ fn parse_frame(
         }
     }
     // The file is row-major; glam is column-major.
-    let c2w = Mat4::from_cols_array_2d(&m).transpose();
+    let c2w = Mat4::from_cols_array_2d(&m).transpose() * camera_axes(root, frame)?;
     let file_w = number(root, frame, "w")?;
     let file_h = number(root, frame, "h")?;
     let (width, height) = match (size, file_w, file_h) {
@@ -158,6 +177,28 @@ mod tests {
         assert_eq!(cam.position(), glam::Vec3::new(1.0, 2.0, 3.0));
         let cam = load(&json, None).unwrap()[0].camera;
         assert_eq!((cam.width, cam.height, cam.fx), (80, 60, 100.0));
+    }
+
+    #[test]
+    fn opencv_camera_axes_turn_y_and_z_around() {
+        let json = |axes: &str| {
+            format!(
+                r#"{{"camera_angle_x": 0.5, {axes} "frames": [{{"transform_matrix": {EYE}}}]}}"#
+            )
+        };
+        let gl = load(&json(""), Some((8, 8))).unwrap()[0].camera;
+        let cv = load(&json(r#""camera_axes": "opencv","#), Some((8, 8))).unwrap()[0].camera;
+        assert_eq!(cv.position(), gl.position());
+        assert_eq!(cv.c2w.x_axis, gl.c2w.x_axis);
+        assert_eq!(cv.c2w.y_axis, -gl.c2w.y_axis);
+        assert_eq!(cv.c2w.z_axis, -gl.c2w.z_axis);
+        let msg = load(&json(r#""camera_axes": "directx","#), Some((8, 8)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("camera_axes") && msg.contains("directx"),
+            "{msg}"
+        );
     }
 
     #[test]

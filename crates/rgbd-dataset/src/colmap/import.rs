@@ -5,12 +5,15 @@
 
 use std::path::{Path, PathBuf};
 
+use std::collections::BTreeMap;
+
 use glam::{DMat3, DMat4, DVec3};
 use serde_json::json;
 
 use super::{model_error, CameraModel, ColmapCamera, ColmapModel};
 use crate::error::{invalid, io_error, Error, Result};
 use crate::io::{create_dir, write_bytes};
+use crate::lens::Undistortion;
 
 /// Where the capture's points go: all but the outermost 1% on each side per axis (between
 /// these percentiles) fill this much of the model's half side, as `--bounds auto` places a scene
@@ -25,8 +28,8 @@ const FILLED_HALF_SIDE: f64 = 1.0 / 1.1;
 /// `orientation_method up` does); the centre and scale put the middle of the scene's box at the
 /// origin and its largest half side at 1 / 1.1 of the cube's, as `--bounds auto` places a scene
 /// from its depth maps. The scene's box is the box of the foreground's visual hull when the
-/// photos' foreground is known ([`Placement::of_foreground`]), else the sparse points' central
-/// 98% ([`Placement::of`]).
+/// photos' foreground is known ([`Placement::of_foreground`]) across, the sparse points'
+/// central 98% up and down.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
     pub rotation: DMat3,
@@ -35,24 +38,16 @@ pub struct Placement {
 }
 
 impl Placement {
-    /// The placement of `model`'s registered images and points, the box from the points. Errors
-    /// without images or points, or when the points' box is a single point.
-    pub fn of(model: &ColmapModel) -> Result<Self> {
-        let rotation = upright(model)?;
-        let (low, high) = points_box(model, rotation);
-        Self::around(rotation, (low, high))
-    }
-
     /// The placement with the box of the foreground's visual hull: the points of space that
-    /// every photo seeing them shows as foreground (`alpha[i]`, one per registered image, in
-    /// order: opacity bytes row-major at the camera's size, above half counts). Sparse points
+    /// every photo seeing them shows as foreground (`foreground[i]`, one per registered image,
+    /// in order). Sparse points
     /// miss the parts of a scene where few features are found (a plain ground's far edges, seen
     /// obliquely); the masks do not. The hull bounds the scene across (x and y after turning it
     /// upright), searched on a grid over twice the points' box across and between their lowest
     /// and highest up and down, among the grid points at least half the photos frame; up and
     /// down the points' box bounds it (photos from around and above carve neither under the
     /// ground nor far above it).
-    pub fn of_foreground(model: &ColmapModel, alpha: &[Vec<u8>]) -> Result<Self> {
+    pub fn of_foreground(model: &ColmapModel, foreground: &[Foreground]) -> Result<Self> {
         let rotation = upright(model)?;
         let (low, high) = points_box(model, rotation);
         // Across, the hull; up and down, the points: photos from around and above carve the
@@ -64,7 +59,7 @@ impl Placement {
             DVec3::new(centre.x - half.x, centre.y - half.y, low.z),
             DVec3::new(centre.x + half.x, centre.y + half.y, high.z),
         );
-        let Some((hull_low, hull_high)) = hull_box(model, alpha, rotation, search) else {
+        let Some((hull_low, hull_high)) = hull_box(model, foreground, rotation, search) else {
             return Self::around(rotation, (low, high));
         };
         let low = DVec3::new(hull_low.x, hull_low.y, low.z);
@@ -165,23 +160,23 @@ const HULL_GRID: usize = 64;
 /// is kept.
 fn hull_box(
     model: &ColmapModel,
-    alpha: &[Vec<u8>],
+    foreground: &[Foreground],
     rotation: DMat3,
     (low, high): (DVec3, DVec3),
 ) -> Option<(DVec3, DVec3)> {
     let views: Vec<MaskedView<'_>> = model
         .images
         .iter()
-        .zip(alpha)
-        .filter_map(|(image, mask)| {
+        .zip(foreground)
+        .map(|(image, photo)| {
             let camera = &model.cameras[&image.camera_id];
-            Some(MaskedView {
+            MaskedView {
                 rotation: image.world_to_camera_rotation(),
                 translation: DVec3::from(image.translation),
-                intrinsics: pinhole_params(camera)?,
+                intrinsics: photo.intrinsics,
                 size: (camera.width as usize, camera.height as usize),
-                alpha: mask,
-            })
+                alpha: &photo.alpha,
+            }
         })
         .collect();
     // A point of the scene is in most photos' frame; points that few photos frame are not
@@ -212,6 +207,15 @@ fn hull_box(
         }
     }
     kept
+}
+
+/// A registered photo's foreground, as [`Placement::of_foreground`] reads it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Foreground {
+    /// `fx, fy, cx, cy` of the photo's pinhole camera (after undistortion), in pixels.
+    pub intrinsics: [f64; 4],
+    /// Opacity bytes, row-major at the camera's size; above half is foreground.
+    pub alpha: Vec<u8>,
 }
 
 /// A registered photo as the visual hull sees it: its pose, pinhole intrinsics and foreground.
@@ -270,26 +274,48 @@ pub struct ImportSummary {
     pub width: u32,
     pub height: u32,
     pub placement: Placement,
+    /// The cameras whose photos were undistorted (lens models other than the pinholes).
+    pub undistorted: Vec<UndistortedCamera>,
+}
+
+/// A camera whose photos [`import`] undistorted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UndistortedCamera {
+    pub id: u32,
+    pub model: CameraModel,
+    /// `fx, fy, cx, cy` of the photos' camera, pixels.
+    pub photo: [f64; 4],
+    /// `fx, fy, cx, cy` of the pinhole camera written (same size and principal point, the focal
+    /// lengths scaled so that every pixel is seen).
+    pub pinhole: [f64; 4],
 }
 
 /// Writes the reconstruction in `model_dir` ([`ColmapModel::read`]) with its photos as a
 /// dataset in `out`: `images/NNN.png` (RGBA) and `transforms.json` (written last), the scene
-/// placed in the model's cube ([`Placement`]). Cameras must be pinhole (`PINHOLE` or
-/// `SIMPLE_PINHOLE`, what `colmap image_undistorter` writes); other models are refused by name.
+/// placed in the model's cube ([`Placement`]). Photos of cameras with lens distortion
+/// (SIMPLE_RADIAL, RADIAL, OPENCV, OPENCV_FISHEYE) are undistorted into pinhole cameras
+/// ([`crate::lens::Undistortion`]); other distorting models are refused by name.
 /// Photos need a foreground: their alpha channel or `options.masks`; photos that are opaque
 /// everywhere with no masks are refused, since the model learns a bounded scene.
 pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<ImportSummary> {
     let model = ColmapModel::read(model_dir)?;
     let size = common_size(&model, model_dir)?;
-    let intrinsics = model
-        .images
-        .iter()
-        .map(|image| pinhole(&model.cameras[&image.camera_id], model_dir))
-        .collect::<Result<Vec<_>>>()?;
+    let mut undistortions = BTreeMap::new();
+    for camera in model.cameras.values() {
+        undistortions.insert(camera.id, undistortion(camera, model_dir)?);
+    }
     let photos = model
         .images
         .iter()
-        .map(|image| photo_with_alpha(&image.name, options, size))
+        .map(|image| {
+            let photo = photo_with_alpha(&image.name, options, size)?;
+            let undistortion = &undistortions[&image.camera_id];
+            Ok(if undistortion.is_identity() {
+                photo
+            } else {
+                undistortion.apply(&photo)
+            })
+        })
         .collect::<Result<Vec<_>>>()?;
     if photos
         .iter()
@@ -305,17 +331,30 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
             ),
         ));
     }
-    let alpha: Vec<Vec<u8>> = photos
+    let intrinsics: Vec<[f64; 4]> = model
+        .images
         .iter()
-        .map(|photo| photo.pixels().map(|p| p[3]).collect())
+        .map(|image| undistortions[&image.camera_id].pinhole())
         .collect();
-    let placement = Placement::of_foreground(&model, &alpha)?;
+    let foreground: Vec<Foreground> = photos
+        .iter()
+        .zip(&intrinsics)
+        .map(|(photo, &intrinsics)| Foreground {
+            intrinsics,
+            alpha: photo.pixels().map(|p| p[3]).collect(),
+        })
+        .collect();
+    let placement = Placement::of_foreground(&model, &foreground)?;
     create_dir(&out.join("images"))?;
     let transforms_path = out.join("transforms.json");
     radiance_volume::io::remove_file_if_exists(&transforms_path)?;
     let mut frames = Vec::with_capacity(model.images.len());
-    for (i, ((image, rgba), [fx, fy, cx, cy])) in
-        model.images.iter().zip(&photos).zip(intrinsics).enumerate()
+    for (i, ((image, rgba), [fx, fy, cx, cy])) in model
+        .images
+        .iter()
+        .zip(&photos)
+        .zip(&intrinsics)
+        .enumerate()
     {
         let file = format!("images/{i:03}.png");
         let mut bytes = Vec::new();
@@ -327,9 +366,11 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
         write_bytes(&out.join(&file), &bytes)?;
         let c2w = placement.place_camera(image.camera_to_world());
         let rows: Vec<[f64; 4]> = (0..4).map(|r| c2w.row(r).to_array()).collect();
+        let camera = &model.cameras[&image.camera_id];
         frames.push(json!({
             "file_path": file,
             "colmap_name": image.name,
+            "colmap_camera_model": camera.model.name(),
             "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy,
             "transform_matrix": rows,
         }));
@@ -358,6 +399,17 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
         width: size.0,
         height: size.1,
         placement,
+        undistorted: model
+            .cameras
+            .values()
+            .filter(|camera| !undistortions[&camera.id].is_identity())
+            .map(|camera| UndistortedCamera {
+                id: camera.id,
+                model: camera.model,
+                photo: undistortions[&camera.id].photo(),
+                pinhole: undistortions[&camera.id].pinhole(),
+            })
+            .collect(),
     })
 }
 
@@ -393,31 +445,30 @@ fn common_size(model: &ColmapModel, dir: &Path) -> Result<(u32, u32)> {
     }
 }
 
-/// `fx, fy, cx, cy` of a pinhole camera, `None` for a model with distortion.
-fn pinhole_params(camera: &ColmapCamera) -> Option<[f64; 4]> {
-    let p = &camera.params;
-    match camera.model {
-        CameraModel::SimplePinhole => Some([p[0], p[0], p[1], p[2]]),
-        CameraModel::Pinhole => Some([p[0], p[1], p[2], p[3]]),
-        _ => None,
-    }
-}
-
-/// `fx, fy, cx, cy` of a pinhole camera; other models are refused naming the model.
-fn pinhole(camera: &ColmapCamera, dir: &Path) -> Result<[f64; 4]> {
-    match (pinhole_params(camera), camera.model) {
-        (Some(params), _) => Ok(params),
-        (None, other) => Err(model_error(
+/// How `camera`'s photos become pinhole ones; models volgen does not undistort are refused
+/// naming the model.
+fn undistortion(camera: &ColmapCamera, dir: &Path) -> Result<Undistortion> {
+    let size = (camera.width as u32, camera.height as u32);
+    let Some((intrinsics, lens)) = camera.lens() else {
+        return Err(model_error(
             dir.to_path_buf(),
             format!(
-                "camera {} is {other}, a model with lens distortion: undistort the photos first \
-                 (`colmap image_undistorter --image_path IMAGES --input_path SPARSE --output_path \
-                 UNDISTORTED` writes PINHOLE cameras and the undistorted photos), then import \
-                 UNDISTORTED/sparse with --images UNDISTORTED/images",
-                camera.id
+                "camera {} is {}, a lens model volgen does not undistort (it does {}): undistort \
+                 the photos first (`colmap image_undistorter --image_path IMAGES --input_path \
+                 SPARSE --output_path UNDISTORTED` writes PINHOLE cameras and the undistorted \
+                 photos), then import UNDISTORTED/sparse with --images UNDISTORTED/images",
+                camera.id,
+                camera.model,
+                ColmapCamera::UNDISTORTED_MODELS
             ),
-        )),
-    }
+        ));
+    };
+    Undistortion::new(lens, intrinsics, size).map_err(|why| {
+        model_error(
+            dir.to_path_buf(),
+            format!("camera {} ({}): {why}", camera.id, camera.model),
+        )
+    })
 }
 
 /// The photo `name` as RGBA: its alpha, or the mask's grey as alpha.

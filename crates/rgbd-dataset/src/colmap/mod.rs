@@ -29,7 +29,7 @@ mod binary;
 mod import;
 mod text;
 
-pub use import::{import, ImportOptions, ImportSummary, Placement};
+pub use import::{import, Foreground, ImportOptions, ImportSummary, Placement, UndistortedCamera};
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -38,6 +38,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DMat4, DQuat, DVec3, DVec4};
 
 use crate::error::{Error, Result};
+use crate::lens::Lens;
 
 /// A camera model of COLMAP, by its id in the binary files and its name in the text ones.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -214,6 +215,47 @@ impl ColmapModel {
             }
         }
         Ok(model)
+    }
+}
+
+impl ColmapCamera {
+    /// The models [`ColmapCamera::lens`] knows, for messages.
+    pub const UNDISTORTED_MODELS: &'static str =
+        "SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV and OPENCV_FISHEYE";
+
+    /// `fx, fy, cx, cy` (pixels) and the lens of the camera; `None` for the models volgen does
+    /// not undistort itself (FULL_OPENCV, FOV and the other fisheyes: `colmap
+    /// image_undistorter` does).
+    pub fn lens(&self) -> Option<([f64; 4], Lens)> {
+        let p = &self.params;
+        let radial = |k: &[f64]| {
+            let mut radial = [0.0; 4];
+            radial[..k.len()].copy_from_slice(k);
+            Lens::BrownConrady {
+                radial,
+                tangential: [0.0; 2],
+            }
+        };
+        Some(match self.model {
+            CameraModel::SimplePinhole => ([p[0], p[0], p[1], p[2]], Lens::Pinhole),
+            CameraModel::Pinhole => ([p[0], p[1], p[2], p[3]], Lens::Pinhole),
+            CameraModel::SimpleRadial => ([p[0], p[0], p[1], p[2]], radial(&p[3..4])),
+            CameraModel::Radial => ([p[0], p[0], p[1], p[2]], radial(&p[3..5])),
+            CameraModel::OpenCv => (
+                [p[0], p[1], p[2], p[3]],
+                Lens::BrownConrady {
+                    radial: [p[4], p[5], 0.0, 0.0],
+                    tangential: [p[6], p[7]],
+                },
+            ),
+            CameraModel::OpenCvFisheye => (
+                [p[0], p[1], p[2], p[3]],
+                Lens::Fisheye {
+                    radial: [p[4], p[5], p[6], p[7]],
+                },
+            ),
+            _ => return None,
+        })
     }
 }
 
