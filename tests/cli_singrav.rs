@@ -292,6 +292,25 @@ fn train_refuses_unknown_depth_and_takes_the_depth_kind_flag() {
         "vstar",
     ]));
     assert!(text.contains("reconstruction_depth_rmse: none"), "{text}");
+    // Depth from a fit of the views instead: recorded, and trained with the depth loss.
+    std::fs::remove_dir_all(&run).unwrap();
+    let out = train(&[
+        "--iterations",
+        "2",
+        "--depth-from-fit",
+        "--depth-fit-steps",
+        "30",
+    ]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && said.contains("depth from the fit") && said.contains("left out"),
+        "{said}"
+    );
+    assert!(run.join("depth_fit.safetensors").is_file());
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["ablations"]["use_depth"], true);
+    assert_eq!(config["run"]["depth_from_fit"], true);
     // `import colmap` names what is missing.
     let err = failure(&volgen(&[
         "import",

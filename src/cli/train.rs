@@ -6,12 +6,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use radiance_volume::RadianceVolume;
 use rgbd_dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::checkpoint::CHECKPOINT_FILE;
 use singrav::train::{
     train, Control, Event, LossTerm, Progress, RunOptions, StepLosses, TrainOutcome,
 };
 use singrav::{SinGrav, SwdFeatures, TrainConfig};
+use volume_fit::FitConfig;
 
 /// Arguments of `volgen train`.
 #[derive(Debug, clap::Args)]
@@ -33,6 +35,16 @@ pub struct TrainArgs {
     /// --resume.
     #[arg(long, value_name = "BOX|auto", allow_hyphen_values = true)]
     bounds: Option<String>,
+    /// Depth from a fit of the views (the paper's NeRF-depth), for photos without depth maps:
+    /// fits the training views without depth (`volgen fit`'s defaults, 64^3; written to
+    /// RUN/depth_fit.safetensors and reused by --resume), renders its depth from every camera
+    /// and trains with it, pixels the fit leaves thin left out of the depth loss. Replaces
+    /// the dataset's own depth maps where it has some. Give it again with --resume.
+    #[arg(long, conflicts_with = "no_depth")]
+    depth_from_fit: bool,
+    /// Steps of the fit --depth-from-fit runs (default: `volgen fit`'s).
+    #[arg(long, value_name = "K", requires = "depth_from_fit")]
+    depth_fit_steps: Option<usize>,
     #[command(flatten)]
     options: TrainOptions,
 }
@@ -266,13 +278,75 @@ fn fit_for_training(
     Ok(path)
 }
 
+/// `dataset` with depth from a fit of its training views without depth
+/// ([`Dataset::with_depth_from`]): the fit is written to `RUN/depth_fit.safetensors`, or read
+/// from there when resuming.
+fn with_depth_from_fit(
+    config: &TrainConfig,
+    dataset: Dataset,
+    args: &TrainArgs,
+) -> Result<Dataset> {
+    let run_dir = &args.out;
+    let path = run_dir.join("depth_fit.safetensors");
+    let volume = if args.options.resume && path.exists() {
+        RadianceVolume::load_safetensors(&path)?
+    } else {
+        let defaults = FitConfig::default();
+        let mut fit_config = FitConfig {
+            use_depth: false,
+            budget: args
+                .depth_fit_steps
+                .map_or(defaults.budget, volume_fit::FitBudget::Steps),
+            ..defaults
+        };
+        if let Some(bounds) = &config.run.bounds {
+            fit_config.aabb = bounds.cube();
+        }
+        let training = match config.run.holdout {
+            Some(every) => dataset.holdout_split(every)?.0,
+            None => (0..dataset.len()).collect(),
+        };
+        let fitted = super::fit::with_fit_progress(&dataset, |observer| {
+            Ok(volume_fit::fit_volume(
+                &dataset,
+                &training,
+                &fit_config,
+                observer,
+            )?)
+        })?;
+        std::fs::create_dir_all(run_dir)
+            .with_context(|| format!("creating {}", run_dir.display()))?;
+        fitted.volume.save_safetensors(&path)?;
+        eprintln!(
+            "fitted {}^3 to the views without depth in {:.1} s for their depth: {}",
+            fit_config.size,
+            fitted.seconds,
+            path.display()
+        );
+        fitted.volume
+    };
+    let (dataset, coverage) = dataset.with_depth_from(&volume)?;
+    eprintln!(
+        "depth from the fit: {} of {} foreground pixels ({:.1}%) are too thin in it and left \
+         out of the depth loss",
+        coverage.holes,
+        coverage.foreground,
+        100.0 * coverage.holes as f64 / coverage.foreground.max(1) as f64
+    );
+    Ok(dataset)
+}
+
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
     let mut config = args.options.config()?;
-    let dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
+    config.run.depth_from_fit = args.depth_from_fit;
+    let mut dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
+    config.run.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
+    if args.depth_from_fit {
+        dataset = with_depth_from_fit(&config, dataset, args)?;
+    }
     // Without depth maps the depth loss and the critics' depth channel have nothing to see.
     config.ablations.use_depth &= dataset.depth_kind() != DepthKind::None;
-    config.run.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
     let options = args.options.run_options(&config, &dataset, &args.out)?;
     if options.resume && args.out.is_dir() && !args.out.join(CHECKPOINT_FILE).exists() {
         eprintln!(

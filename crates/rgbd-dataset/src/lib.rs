@@ -118,6 +118,7 @@ mod write;
 pub use bounds::SceneBounds;
 pub use depth::DepthKind;
 pub use error::{Error, Result};
+pub use rendered::{DepthCoverage, MIN_COVERED_SHARE};
 pub use source::SceneSource;
 pub use write::{
     render_config, write_built_in, write_dataset, DatasetSpec, DatasetSummary, DEPTH_SCALE,

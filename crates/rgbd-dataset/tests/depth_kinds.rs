@@ -363,3 +363,67 @@ fn a_dataset_without_depth_maps_loads_with_every_pixel_left_out() {
     assert!(err.contains("depth_file_path"), "{err}");
     assert_eq!("none".parse::<DepthKind>().unwrap(), DepthKind::None);
 }
+
+/// Depth from a reconstruction (`Dataset::with_depth_from`): the scene itself gives back the
+/// depth maps the files hold (to their 16-bit steps of 1e-4, and their 8-bit alpha: the depth
+/// is the ray distance times the file's alpha, which is the rendering's to half of 1/255); an
+/// empty reconstruction gives
+/// none, every foreground pixel left out, colour and opacity untouched either way.
+#[test]
+fn depth_from_a_reconstruction_is_the_scene_s_where_it_covers_the_views() {
+    use rgbd_dataset::scenes::{Scene, StandingStones};
+    let dir = tempfile::tempdir().unwrap();
+    let spec = DatasetSpec {
+        views: 3,
+        resolution: 20,
+        grid: 24,
+        seed: 4,
+    };
+    write_dataset(&StandingStones::new(4), dir.path(), &spec).unwrap();
+    let data = Dataset::load(dir.path(), [1.0; 3]).unwrap();
+    let scene = StandingStones::new(4)
+        .to_volume(radiance_volume::GridDims::cube(24))
+        .unwrap();
+    let level = |d: &Dataset| d.level(20, 20, &Device::Cpu).unwrap();
+    let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let (from_scene, coverage) = data.with_depth_from(&scene).unwrap();
+    assert_eq!(coverage.holes, 0);
+    assert!(coverage.foreground > 100, "{coverage:?}");
+    assert_eq!(from_scene.depth_kind(), DepthKind::Expected);
+    let (truth, got) = (level(&data), level(&from_scene));
+    let alpha = flat(&truth.opacity);
+    for ((want, got), a) in flat(&truth.depths)
+        .iter()
+        .zip(flat(&got.depths))
+        .zip(&alpha)
+    {
+        // Where the view shows (next to) nothing, the depth is 0, the file's at most the
+        // farthest ray distance (5.3) times an opacity that rounds to 1/255 or less.
+        let allowed = 2e-4
+            + if *a > 1.0 / 255.0 {
+                want * (0.5 / 255.0) / a
+            } else {
+                0.03
+            };
+        assert!(
+            (want - got).abs() <= allowed,
+            "{got} against {want} at alpha {a}"
+        );
+    }
+    assert_eq!(flat(&truth.images), flat(&got.images));
+    assert_eq!(flat(&truth.opacity), flat(&got.opacity));
+
+    let empty = radiance_volume::RadianceVolume::new(
+        Tensor::zeros((4, 8, 8, 8), candle_core::DType::F32, &Device::Cpu).unwrap(),
+        scene.aabb(),
+    )
+    .unwrap();
+    let (from_nothing, coverage) = data.with_depth_from(&empty).unwrap();
+    assert_eq!(coverage.holes, coverage.foreground);
+    let shown = flat(&truth.opacity)
+        .iter()
+        .filter(|&&a| a > 1.0 / 255.0)
+        .count();
+    assert_eq!(from_nothing.depth_left_out(), shown);
+    assert!(flat(&level(&from_nothing).depths).iter().all(|&d| d == 0.0));
+}

@@ -290,6 +290,13 @@ pub struct RunPolicy {
     /// the box into the model's cube, and generated volumes are placed back on
     /// [`SceneBounds::cube`].
     pub bounds: Option<SceneBounds>,
+    /// The dataset's depth comes from a direct fit of its views (the paper's "NeRF-depth",
+    /// for photos without a depth sensor): `volgen train --depth-from-fit` fits the views
+    /// without depth, renders the fit's depth from every camera
+    /// ([`rgbd_dataset::Dataset::with_depth_from`]) and trains on that dataset. Recorded so
+    /// that a resumed run must say the same.
+    #[serde(default)]
+    pub depth_from_fit: bool,
 }
 
 /// The features of the last scale's sliced Wasserstein texture loss.

@@ -244,6 +244,7 @@ fn paper() -> TrainConfig {
             checkpoint_seconds: 300,
             checkpoint_iterations: 0,
             bounds: None,
+            depth_from_fit: false,
         },
     }
 }
