@@ -3,7 +3,9 @@
 #   1. build a textured scene with bpy (make_test_scene.py --textured) and render RGBA photos of
 #      it with export_dataset.py (its true poses and depth stay aside, for the checks only),
 #   2. COLMAP 3.8 on the photos alone: feature_extractor (one PINHOLE camera), exhaustive_matcher,
-#      mapper,
+#      mapper; with LENS=opencv the photos are first warped as an OPENCV lens with distortion
+#      takes them (research example lens_photos, coefficients LENS_COEFFS) and COLMAP estimates
+#      an OPENCV camera, which the import undistorts,
 #   3. volgen import colmap, then check the poses against Blender's up to a similarity
 #      (research example pose_alignment: median rotation error <= MAX_ROT degrees, median centre
 #      error <= MAX_CENTRE of the cameras' spread),
@@ -17,7 +19,8 @@
 #
 # Needs Debian's colmap (apt-get install colmap) and bpy (../shared/validators/setup.sh).
 # Environment: PYTHON (the validators' venv), VOLGEN (cargo's release binary), VIEWS (40),
-# SIZE (192), MAX_ROT (2), MAX_CENTRE (0.03), MARGIN_DB (4).
+# SIZE (192), MAX_ROT (2), MAX_CENTRE (0.03), MARGIN_DB (4), LENS (pinhole or opencv),
+# LENS_COEFFS ("-0.15 0.04 0.001 -0.0008": k1 k2 p1 p2).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -30,9 +33,16 @@ SIZE="${SIZE:-192}"
 MAX_ROT="${MAX_ROT:-2}"
 MAX_CENTRE="${MAX_CENTRE:-0.03}"
 MARGIN_DB="${MARGIN_DB:-4}"
+LENS="${LENS:-pinhole}"
+LENS_COEFFS="${LENS_COEFFS:--0.15 0.04 0.001 -0.0008}"
+case "$LENS" in
+  pinhole) camera_model=PINHOLE ;;
+  opencv) camera_model=OPENCV ;;
+  *) echo "LENS must be pinhole or opencv, got $LENS" >&2; exit 2 ;;
+esac
 export QT_QPA_PLATFORM=offscreen
 
-(cd "$root" && cargo build --release --bin volgen && cargo build --release -p research --example pose_alignment)
+(cd "$root" && cargo build --release --bin volgen && cargo build --release -p research --example pose_alignment --example lens_photos)
 VOLGEN="${VOLGEN:-$root/target/release/volgen}"
 ALIGN="$root/target/release/examples/pose_alignment"
 
@@ -41,15 +51,23 @@ echo "== scene and photos ($VIEWS views at $SIZE^2)"
 "$PYTHON" "$root/tools/blender/export_dataset.py" "$work/scene.blend" --out "$work/blender" \
   --views "$VIEWS" --size "$SIZE" --samples 16 > "$work/export.log"
 
-echo "== COLMAP"
+photos="$work/blender/images"
+if [ "$LENS" = opencv ]; then
+  echo "== photos through an OPENCV lens (k1 k2 p1 p2 = $LENS_COEFFS)"
+  # shellcheck disable=SC2086
+  "$root/target/release/examples/lens_photos" "$work/blender" "$work/lens_photos" $LENS_COEFFS
+  photos="$work/lens_photos"
+fi
+
+echo "== COLMAP ($camera_model camera)"
 rm -rf "$work/db.db" "$work/sparse" && mkdir -p "$work/sparse"
-colmap feature_extractor --database_path "$work/db.db" --image_path "$work/blender/images" \
-  --ImageReader.single_camera 1 --ImageReader.camera_model PINHOLE --SiftExtraction.use_gpu 0 > "$work/colmap.log" 2>&1
+colmap feature_extractor --database_path "$work/db.db" --image_path "$photos" \
+  --ImageReader.single_camera 1 --ImageReader.camera_model "$camera_model" --SiftExtraction.use_gpu 0 > "$work/colmap.log" 2>&1
 colmap exhaustive_matcher --database_path "$work/db.db" --SiftMatching.use_gpu 0 >> "$work/colmap.log" 2>&1
-colmap mapper --database_path "$work/db.db" --image_path "$work/blender/images" --output_path "$work/sparse" >> "$work/colmap.log" 2>&1
+colmap mapper --database_path "$work/db.db" --image_path "$photos" --output_path "$work/sparse" >> "$work/colmap.log" 2>&1
 
 echo "== import and poses"
-"$VOLGEN" import colmap "$work/sparse/0" --images "$work/blender/images" --out "$work/imported"
+"$VOLGEN" import colmap "$work/sparse/0" --images "$photos" --out "$work/imported"
 "$ALIGN" "$work/blender" "$work/imported" "$MAX_ROT" "$MAX_CENTRE"
 
 echo "== fits (true poses against COLMAP's, the same photos)"

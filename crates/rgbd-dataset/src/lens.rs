@@ -285,48 +285,89 @@ impl Undistortion {
             w * h,
             "the photo must have the size the undistortion was made for"
         );
-        let premultiplied: Vec<[f32; 4]> = photo
-            .iter()
-            .map(|&[r, g, b, a]| [r * a, g * a, b * a, a])
-            .collect();
-        let at = |i: i64, j: i64| {
-            let i = i.clamp(0, w as i64 - 1) as usize;
-            let j = j.clamp(0, h as i64 - 1) as usize;
-            premultiplied[j * w + i]
-        };
+        let premultiplied = premultiply(photo);
         let mut out = vec![[0f32; 4]; w * h];
         out.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
             for (i, pixel) in row.iter_mut().enumerate() {
                 let (su, sv) = self.source_of(i as f64 + 0.5, j as f64 + 0.5);
-                let (x, y) = (su - 0.5, sv - 0.5);
-                let (x0, y0) = (x.floor(), y.floor());
-                let (tx, ty) = ((x - x0) as f32, (y - y0) as f32);
-                let (x0, y0) = (x0 as i64, y0 as i64);
-                let mut sum = [0f32; 4];
-                for (di, dj, weight) in [
-                    (0, 0, (1.0 - tx) * (1.0 - ty)),
-                    (1, 0, tx * (1.0 - ty)),
-                    (0, 1, (1.0 - tx) * ty),
-                    (1, 1, tx * ty),
-                ] {
-                    let p = at(x0 + di, y0 + dj);
-                    for c in 0..4 {
-                        sum[c] += weight * p[c];
-                    }
-                }
-                let alpha = sum[3];
-                let straight = |c: f32| {
-                    if alpha > 0.0 {
-                        (c / alpha).clamp(0.0, 1.0)
-                    } else {
-                        0.0
-                    }
-                };
-                *pixel = [straight(sum[0]), straight(sum[1]), straight(sum[2]), alpha];
+                *pixel = unpremultiply(bilinear(&premultiplied, (w, h), su, sv));
             }
         });
         out
     }
+}
+
+/// What a camera with `lens` and intrinsics `fx, fy, cx, cy` (pixels) photographs of the scene
+/// that `pinhole` shows through a pinhole camera with the same intrinsics and size: each pixel
+/// shows what the pinhole's ray through its ideal point ([`Lens::undistort`]) sees, bilinear in
+/// premultiplied colour. The inverse of [`Undistortion::apply`] up to its focal length: for
+/// simulating a lens (tests, checks through structure from motion). Pixels whose ideal point
+/// cannot be found (beyond where the lens folds) are transparent.
+pub fn photo_through_lens(
+    pinhole: &image::RgbaImage,
+    [fx, fy, cx, cy]: [f64; 4],
+    lens: Lens,
+) -> image::RgbaImage {
+    let (w, h) = (pinhole.width() as usize, pinhole.height() as usize);
+    let straight: Vec<[f32; 4]> = pinhole
+        .pixels()
+        .map(|p| p.0.map(|v| f32::from(v) / 255.0))
+        .collect();
+    let premultiplied = premultiply(&straight);
+    image::RgbaImage::from_fn(pinhole.width(), pinhole.height(), |i, j| {
+        let xd = (f64::from(i) + 0.5 - cx) / fx;
+        let yd = (f64::from(j) + 0.5 - cy) / fy;
+        let Some((x, y)) = lens.undistort(xd, yd) else {
+            return image::Rgba([0; 4]);
+        };
+        let pixel = unpremultiply(bilinear(&premultiplied, (w, h), fx * x + cx, fy * y + cy));
+        image::Rgba(pixel.map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8))
+    })
+}
+
+fn premultiply(straight: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    straight
+        .iter()
+        .map(|&[r, g, b, a]| [r * a, g * a, b * a, a])
+        .collect()
+}
+
+fn unpremultiply([r, g, b, alpha]: [f32; 4]) -> [f32; 4] {
+    let straight = |c: f32| {
+        if alpha > 0.0 {
+            (c / alpha).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    [straight(r), straight(g), straight(b), alpha]
+}
+
+/// The bilinear sample of row-major `pixels` of `size` at continuous pixel coordinates `(u,
+/// v)` (pixel centres at +0.5; beyond the edge pixels' centres the edge is repeated).
+fn bilinear(pixels: &[[f32; 4]], (w, h): (usize, usize), u: f64, v: f64) -> [f32; 4] {
+    let (x, y) = (u - 0.5, v - 0.5);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (tx, ty) = ((x - x0) as f32, (y - y0) as f32);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let at = |i: i64, j: i64| {
+        let i = i.clamp(0, w as i64 - 1) as usize;
+        let j = j.clamp(0, h as i64 - 1) as usize;
+        pixels[j * w + i]
+    };
+    let mut sum = [0f32; 4];
+    for (di, dj, weight) in [
+        (0, 0, (1.0 - tx) * (1.0 - ty)),
+        (1, 0, tx * (1.0 - ty)),
+        (0, 1, (1.0 - tx) * ty),
+        (1, 1, tx * ty),
+    ] {
+        let p = at(x0 + di, y0 + dj);
+        for c in 0..4 {
+            sum[c] += weight * p[c];
+        }
+    }
+    sum
 }
 
 #[cfg(test)]

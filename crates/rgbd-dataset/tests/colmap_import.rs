@@ -11,7 +11,7 @@ use common::lens_photos;
 
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
 use rgbd_dataset::colmap::{import, ImportOptions};
-use rgbd_dataset::lens::{Lens, Undistortion};
+use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
 
@@ -272,7 +272,7 @@ fn photos_through_a_distorting_lens_come_back_as_the_pinhole_saw_them() {
         let pinhole = image::open(tmp.path().join("data").join(name))
             .unwrap()
             .to_rgba8();
-        let distorted = lens_photos::through_lens(&pinhole, k, lens);
+        let distorted = photo_through_lens(&pinhole, k, lens);
         let file = photos.join(name);
         std::fs::create_dir_all(file.parent().unwrap()).unwrap();
         distorted.save(&file).unwrap();

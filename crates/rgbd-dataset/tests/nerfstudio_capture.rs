@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 
 use common::lens_photos;
-use rgbd_dataset::lens::{Lens, Undistortion};
+use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
 use serde_json::{json, Value};
@@ -31,7 +31,7 @@ fn write_capture(data: &Dataset, data_dir: &Path, dir: &Path, axes: &str) -> Val
     let mut frames = Vec::new();
     for (i, (name, camera)) in data.frame_names().iter().zip(data.cameras()).enumerate() {
         let pinhole = image::open(data_dir.join(name)).unwrap().to_rgba8();
-        let photo = lens_photos::through_lens(&pinhole, k, lens());
+        let photo = photo_through_lens(&pinhole, k, lens());
         // A camera's photo has a background (grey here) and no alpha; the mask has the alpha.
         let rgb = image::RgbImage::from_fn(photo.width(), photo.height(), |x, y| {
             let p = photo.get_pixel(x, y);
@@ -119,7 +119,7 @@ fn a_nerfstudio_capture_loads_as_the_pinhole_views_it_was_made_from() {
         let (got, got_colour) = pixels(&loaded);
         for (v, name) in data.frame_names().iter().enumerate() {
             let pinhole = image::open(data_dir.join(name)).unwrap().to_rgba8();
-            let photo = lens_photos::through_lens(&pinhole, k, lens());
+            let photo = photo_through_lens(&pinhole, k, lens());
             for j in 0..SIZE {
                 for i in 0..SIZE {
                     let x = (i as f64 + 0.5 - expected[2]) / expected[0];
