@@ -205,6 +205,16 @@ impl Undistortion {
         self.lens.is_pinhole()
     }
 
+    /// The lens of the photos.
+    pub fn lens(&self) -> Lens {
+        self.lens
+    }
+
+    /// The photos' size in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        self.size
+    }
+
     /// `fx, fy, cx, cy` of the distorted photos' camera.
     pub fn photo(&self) -> [f64; 4] {
         self.photo

@@ -152,6 +152,7 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         .map(|frame| frame.camera)
         .collect();
     let mut pixels = Vec::with_capacity(raw.len());
+    let mut undistortions = Vec::new();
     for (((mut rgba, depth_path, depth, lens), camera), name) in
         raw.into_iter().zip(&mut cameras).zip(&names)
     {
@@ -159,7 +160,7 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
             transforms: &path,
             name: name.clone(),
         };
-        undistort(&mut rgba, camera, lens, &at)?;
+        undistort(&mut rgba, camera, lens, &mut undistortions, &at)?;
         let opacity: Vec<f32> = rgba.data.iter().map(|p| p[3]).collect();
         let converted = to_expected(kind, &depth, &opacity, camera)
             .map_err(|why| at.error(&depth_path, format!("`depth_kind` {kind}: {why}")))?;
@@ -260,11 +261,13 @@ fn apply_mask(rgba: &mut Pixels<[f32; 4]>, file: &Path, at: &FrameRef<'_>) -> Re
 }
 
 /// Resamples a photo taken through `lens` into a pinhole camera ([`Undistortion`]) and makes
-/// `camera` that pinhole one.
+/// `camera` that pinhole one. `made` keeps the undistortions found so far: frames of one
+/// physical camera share theirs (finding the focal length takes a search).
 fn undistort(
     rgba: &mut Pixels<[f32; 4]>,
     camera: &mut Camera,
     lens: Lens,
+    made: &mut Vec<Undistortion>,
     at: &FrameRef<'_>,
 ) -> Result<()> {
     if lens.is_pinhole() {
@@ -272,7 +275,17 @@ fn undistort(
     }
     let size = (camera.width as u32, camera.height as u32);
     let photo = [camera.fx, camera.fy, camera.cx, camera.cy].map(f64::from);
-    let undistortion = Undistortion::new(lens, photo, size).map_err(|why| at.entry_error(why))?;
+    let known = made
+        .iter()
+        .position(|u| u.lens() == lens && u.photo() == photo && u.size() == size);
+    let index = match known {
+        Some(index) => index,
+        None => {
+            made.push(Undistortion::new(lens, photo, size).map_err(|why| at.entry_error(why))?);
+            made.len() - 1
+        }
+    };
+    let undistortion = &made[index];
     rgba.data = undistortion.apply_straight(&rgba.data);
     let pinhole = undistortion.pinhole().map(|v| v as f32);
     *camera = Camera::from_intrinsics(camera.c2w, camera.width, camera.height, pinhole)

@@ -236,3 +236,60 @@ fn models_know_their_names_ids_and_parameter_counts() {
     assert_eq!(CameraModel::from_id(-1), None);
     assert_eq!(CameraModel::from_id(11), None);
 }
+
+#[test]
+fn every_undistorted_model_gives_its_intrinsics_and_lens() {
+    let camera = |model: CameraModel, params: &[f64]| ColmapCamera {
+        id: 1,
+        model,
+        width: 64,
+        height: 48,
+        params: params.to_vec(),
+    };
+    let brown = |radial: [f64; 4], tangential: [f64; 2]| Lens::BrownConrady { radial, tangential };
+    let cases = [
+        (
+            camera(CameraModel::SimplePinhole, &[50.0, 32.0, 24.0]),
+            ([50.0, 50.0, 32.0, 24.0], Lens::Pinhole),
+        ),
+        (
+            camera(CameraModel::Pinhole, &[50.0, 51.0, 32.0, 24.0]),
+            ([50.0, 51.0, 32.0, 24.0], Lens::Pinhole),
+        ),
+        (
+            camera(CameraModel::SimpleRadial, &[50.0, 32.0, 24.0, -0.1]),
+            ([50.0, 50.0, 32.0, 24.0], brown([-0.1, 0.0, 0.0, 0.0], [0.0; 2])),
+        ),
+        (
+            camera(CameraModel::Radial, &[50.0, 32.0, 24.0, -0.1, 0.02]),
+            ([50.0, 50.0, 32.0, 24.0], brown([-0.1, 0.02, 0.0, 0.0], [0.0; 2])),
+        ),
+        (
+            camera(
+                CameraModel::OpenCv,
+                &[50.0, 51.0, 32.0, 24.0, -0.1, 0.02, 0.003, -0.004],
+            ),
+            (
+                [50.0, 51.0, 32.0, 24.0],
+                brown([-0.1, 0.02, 0.0, 0.0], [0.003, -0.004]),
+            ),
+        ),
+        (
+            camera(
+                CameraModel::OpenCvFisheye,
+                &[50.0, 51.0, 32.0, 24.0, 0.1, 0.02, 0.003, 0.004],
+            ),
+            (
+                [50.0, 51.0, 32.0, 24.0],
+                Lens::Fisheye {
+                    radial: [0.1, 0.02, 0.003, 0.004],
+                },
+            ),
+        ),
+    ];
+    for (camera, expected) in cases {
+        assert_eq!(camera.lens(), Some(expected), "{}", camera.model);
+    }
+    let full = camera(CameraModel::FullOpenCv, &[0.0; 12]);
+    assert_eq!(full.lens(), None);
+}
