@@ -13,6 +13,14 @@ use rgbd_dataset::Dataset;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
+/// A dataset's planes at full size: expected depth, opacity, and the depth mask where some
+/// depth is left out.
+struct Planes {
+    depth: Vec<f32>,
+    opacity: Vec<f32>,
+    mask: Option<Vec<f32>>,
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [dataset, fit] = args.as_slice() else {
@@ -22,20 +30,28 @@ fn main() -> Result<()> {
     let volume = RadianceVolume::load_safetensors(fit)?;
     let (fitted, coverage) = truth.with_depth_from(&volume)?;
     let (w, h) = (truth.width(), truth.height());
-    let flat = |d: &Dataset| -> Result<(Vec<f32>, Vec<f32>, Option<Vec<f32>>)> {
+    let planes = |d: &Dataset| -> Result<Planes> {
         let level = d.level(w, h, &Device::Cpu)?;
         let mask = match &level.depth_mask {
             Some(m) => Some(m.flatten_all()?.to_vec1()?),
             None => None,
         };
-        Ok((
-            level.depths.flatten_all()?.to_vec1()?,
-            level.opacity.flatten_all()?.to_vec1()?,
+        Ok(Planes {
+            depth: level.depths.flatten_all()?.to_vec1()?,
+            opacity: level.opacity.flatten_all()?.to_vec1()?,
             mask,
-        ))
+        })
     };
-    let (true_depth, alpha, true_mask) = flat(&truth)?;
-    let (fit_depth, _, fit_mask) = flat(&fitted)?;
+    let Planes {
+        depth: true_depth,
+        opacity: alpha,
+        mask: true_mask,
+    } = planes(&truth)?;
+    let Planes {
+        depth: fit_depth,
+        mask: fit_mask,
+        ..
+    } = planes(&fitted)?;
     let known = |mask: &Option<Vec<f32>>, i: usize| mask.as_ref().is_none_or(|m| m[i] > 0.0);
     let mut errors = Vec::new();
     let mut relative = Vec::new();
