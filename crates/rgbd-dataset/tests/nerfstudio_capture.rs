@@ -74,18 +74,23 @@ fn pixels(d: &Dataset) -> (Vec<f32>, Vec<f32>) {
     (flat(&level.opacity), flat(&level.images))
 }
 
+/// A dataset of the stones (layout 2) at SIZE^2 written to `dir` and loaded.
+fn stones(dir: &Path, views: usize, grid: usize) -> Dataset {
+    let spec = DatasetSpec {
+        views,
+        resolution: SIZE,
+        grid,
+        seed: 1,
+    };
+    write_dataset(&StandingStones::new(2), dir, &spec).unwrap();
+    Dataset::load(dir, [1.0; 3]).unwrap()
+}
+
 #[test]
 fn a_nerfstudio_capture_loads_as_the_pinhole_views_it_was_made_from() {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
-    let spec = DatasetSpec {
-        views: 4,
-        resolution: SIZE,
-        grid: 32,
-        seed: 1,
-    };
-    write_dataset(&StandingStones::new(2), &data_dir, &spec).unwrap();
-    let data = Dataset::load(&data_dir, [1.0; 3]).unwrap();
+    let data = stones(&data_dir, 4, 32);
     let c = &data.cameras()[0];
     let k = [c.fx, c.fy, c.cx, c.cy].map(f64::from);
     let expected = Undistortion::new(lens(), k, (SIZE as u32, SIZE as u32))
@@ -163,14 +168,7 @@ fn a_nerfstudio_capture_loads_as_the_pinhole_views_it_was_made_from() {
 fn what_a_capture_cannot_say_is_refused_by_frame_and_field() {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
-    let spec = DatasetSpec {
-        views: 2,
-        resolution: SIZE,
-        grid: 16,
-        seed: 1,
-    };
-    write_dataset(&StandingStones::new(2), &data_dir, &spec).unwrap();
-    let data = Dataset::load(&data_dir, [1.0; 3]).unwrap();
+    let data = stones(&data_dir, 2, 16);
     let capture = tmp.path().join("capture");
     let root = write_capture(&data, &data_dir, &capture, "opengl");
     let refused = |edit: &dyn Fn(&mut Value)| {
