@@ -3,6 +3,8 @@
 //! (`cargo run --release -p research --example NAME`). Nothing here is a library API: this
 //! file holds what several programs share.
 
+pub mod capture;
+
 /// Grey matter (stone colour: low chroma, not dark soil) by distance from the vertical axis:
 /// the share inside the ring (r < 0.4) and on it (0.45 < r < 0.8). The stones scene's own
 /// check of the arrangement issue, which the library's metrics need no knowledge of.

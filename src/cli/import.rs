@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use rgbd_dataset::colmap::{import, ImportOptions};
+use rgbd_dataset::colmap::{import, ImportOptions, UpFrom};
 
 /// Arguments of `volgen import`.
 #[derive(Debug, clap::Args)]
@@ -39,6 +39,11 @@ struct ColmapArgs {
     /// The dataset directory to write (images/, transforms.json).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Which way is up: `ground`, the normal of the plane most sparse points lie on (the
+    /// cameras' mean up where no credible plane is found), or `cameras`, the cameras' mean up
+    /// direction (nerfstudio's `orientation_method up`).
+    #[arg(long, value_name = "ground|cameras", default_value = "ground")]
+    up: UpFrom,
 }
 
 /// Imports the capture and says where it went and how it was placed.
@@ -47,6 +52,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     let options = ImportOptions {
         images: args.images.clone(),
         masks: args.masks.clone(),
+        up: args.up,
     };
     let summary = import(&args.sparse, &options, &args.out)
         .with_context(|| format!("importing the COLMAP model {}", args.sparse.display()))?;
@@ -72,10 +78,22 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         );
     }
     println!(
-        "placed the capture in the model's cube: up was ({:.3}, {:.3}, {:.3}) (the cameras' mean), \
+        "placed the capture in the model's cube: up was ({:.3}, {:.3}, {:.3}) ({}), \
          centre ({:.3}, {:.3}, {:.3}), scale {:.4} (the foreground's visual hull across and the \
          sparse points up and down fill 1 / 1.1 of the half side)",
-        up.x, up.y, up.z, p.centre.x, p.centre.y, p.centre.z, p.scale
+        up.x,
+        up.y,
+        up.z,
+        match p.up {
+            UpFrom::Ground => "the sparse points' ground plane",
+            UpFrom::Cameras if args.up == UpFrom::Ground =>
+                "the cameras' mean: no credible ground plane in the sparse points",
+            UpFrom::Cameras => "the cameras' mean",
+        },
+        p.centre.x,
+        p.centre.y,
+        p.centre.z,
+        p.scale
     );
     println!(
         "next: volgen fit {0} --out fit.safetensors --holdout 10, or volgen train {0} --out runs/mine --preset tiny",

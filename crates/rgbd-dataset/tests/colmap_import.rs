@@ -10,7 +10,7 @@ use std::path::Path;
 use common::lens_photos;
 
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
-use rgbd_dataset::colmap::{import, ImportOptions};
+use rgbd_dataset::colmap::{import, ImportOptions, UpFrom};
 use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
@@ -111,6 +111,7 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
     let options = ImportOptions {
         images: tmp.path().join("data"),
         masks: None,
+        up: UpFrom::default(),
     };
     let out = tmp.path().join("imported");
     let summary = import(&model, &options, &out).unwrap();
@@ -130,7 +131,19 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
         assert!(angle < 1e-4, "camera {i}: rotations differ by {angle} rad");
     }
     let up = map(0) * DVec3::Z;
-    assert!(up.angle_between(DVec3::Z).to_degrees() < 15.0, "{up}");
+    // Up from the ground plane the surface points find (the scene's flat ground): within 2
+    // degrees; from the cameras' mean up (six cameras, not spread evenly), within 15.
+    assert_eq!(summary.placement.up, UpFrom::Ground);
+    assert!(up.angle_between(DVec3::Z).to_degrees() < 2.0, "{up}");
+    let by_cameras = ImportOptions {
+        up: UpFrom::Cameras,
+        ..options.clone()
+    };
+    let cameras_summary = import(&model, &by_cameras, &tmp.path().join("by_cameras")).unwrap();
+    assert_eq!(cameras_summary.placement.up, UpFrom::Cameras);
+    let cameras_up = cameras_summary.placement.rotation.transpose() * DVec3::Z;
+    let truth_up = summary.placement.rotation.transpose() * DVec3::Z;
+    assert!(cameras_up.angle_between(truth_up).to_degrees() < 15.0);
     // Distances between camera centres scale by one factor: the capture's times the import's.
     let centre = |c: &volrender::Camera| c.position().as_dvec3();
     let factor = SCALE * summary.placement.scale;
@@ -204,12 +217,14 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
     let without = ImportOptions {
         images: photos.clone(),
         masks: None,
+        up: UpFrom::default(),
     };
     let err = import(&model, &without, &out).unwrap_err().to_string();
     assert!(err.contains("opaque") && err.contains("masks"), "{err}");
     let with = ImportOptions {
         images: photos,
         masks: Some(masks),
+        up: UpFrom::default(),
     };
     import(&model, &with, &out).unwrap();
     let opacity = |d: &Dataset| -> Vec<f32> {
@@ -236,6 +251,7 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
     let elsewhere = ImportOptions {
         images: tmp.path().join("nowhere"),
         masks: None,
+        up: UpFrom::default(),
     };
     write_model(&data, &model, &pinhole(&data));
     let err = import(&model, &elsewhere, &out).unwrap_err().to_string();
@@ -283,6 +299,7 @@ fn photos_through_a_distorting_lens_come_back_as_the_pinhole_saw_them() {
     let options = ImportOptions {
         images: photos,
         masks: None,
+        up: UpFrom::default(),
     };
     import(&model, &options, &out).unwrap();
     let imported = Dataset::load(&out, [1.0; 3]).unwrap();

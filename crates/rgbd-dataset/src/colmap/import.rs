@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use glam::{DMat3, DMat4, DVec3};
 use serde_json::json;
 
+use super::up::{rotation_between, up_direction, UpFrom};
 use super::{model_error, CameraModel, ColmapCamera, ColmapModel};
 use crate::error::{invalid, io_error, Error, Result};
 use crate::io::{create_dir, write_bytes};
@@ -24,8 +25,8 @@ const POINT_PERCENTILES: (f64, f64) = (0.01, 0.99);
 const FILLED_HALF_SIDE: f64 = 1.0 / 1.1;
 
 /// The similarity from a capture's frame to the dataset's: `p' = scale * rotation * (p -
-/// centre)`. The rotation turns the cameras' mean up direction to +z (as nerfstudio's
-/// `orientation_method up` does); the centre and scale put the middle of the scene's box at the
+/// centre)`. The rotation turns the up direction to +z (the ground plane's normal or the
+/// cameras' mean up, [`up_direction`]); the centre and scale put the middle of the scene's box at the
 /// origin and its largest half side at 1 / 1.1 of the cube's, as `--bounds auto` places a scene
 /// from its depth maps. The scene's box is the box of the foreground's visual hull when the
 /// photos' foreground is known ([`Placement::of_foreground`]) across, the sparse points'
@@ -35,6 +36,8 @@ pub struct Placement {
     pub rotation: DMat3,
     pub centre: DVec3,
     pub scale: f64,
+    /// Where the up direction the rotation turns to +z came from ([`up_direction`]).
+    pub up: UpFrom,
 }
 
 impl Placement {
@@ -47,8 +50,12 @@ impl Placement {
     /// and highest up and down, among the grid points at least half the photos frame; up and
     /// down the points' box bounds it (photos from around and above carve neither under the
     /// ground nor far above it).
-    pub fn of_foreground(model: &ColmapModel, foreground: &[Foreground]) -> Result<Self> {
-        let rotation = upright(model)?;
+    pub fn of_foreground(
+        model: &ColmapModel,
+        foreground: &[Foreground],
+        up: UpFrom,
+    ) -> Result<Self> {
+        let (rotation, up) = upright(model, up)?;
         let (low, high) = points_box(model, rotation);
         // Across, the hull; up and down, the points: photos from around and above carve the
         // sides well, but not below the ground (which hides it: the hull there spreads wider
@@ -60,15 +67,15 @@ impl Placement {
             DVec3::new(centre.x + half.x, centre.y + half.y, high.z),
         );
         let Some((hull_low, hull_high)) = hull_box(model, foreground, rotation, search) else {
-            return Self::around(rotation, (low, high));
+            return Self::around((rotation, up), (low, high));
         };
         let low = DVec3::new(hull_low.x, hull_low.y, low.z);
         let high = DVec3::new(hull_high.x, hull_high.y, high.z);
-        Self::around(rotation, (low, high))
+        Self::around((rotation, up), (low, high))
     }
 
     /// Centres and scales the box `(low, high)` of the turned frame.
-    fn around(rotation: DMat3, (low, high): (DVec3, DVec3)) -> Result<Self> {
+    fn around((rotation, up): (DMat3, UpFrom), (low, high): (DVec3, DVec3)) -> Result<Self> {
         let half = 0.5 * (high - low);
         if half.max_element() <= 0.0 {
             return Err(invalid(
@@ -80,6 +87,7 @@ impl Placement {
             rotation,
             centre: rotation.transpose() * (0.5 * (low + high)),
             scale: FILLED_HALF_SIDE / half.max_element(),
+            up,
         })
     }
 
@@ -101,23 +109,9 @@ impl Placement {
     }
 }
 
-/// The rotation taking unit vector `from` to unit vector `to` (the shortest one; a half turn
-/// about x when they are opposite).
-fn rotation_between(from: DVec3, to: DVec3) -> DMat3 {
-    let axis = from.cross(to);
-    let cos = from.dot(to).clamp(-1.0, 1.0);
-    if axis.length() < 1e-12 {
-        return if cos > 0.0 {
-            DMat3::IDENTITY
-        } else {
-            DMat3::from_axis_angle(DVec3::X, std::f64::consts::PI)
-        };
-    }
-    DMat3::from_axis_angle(axis.normalize(), cos.acos())
-}
-
-/// The rotation turning the cameras' mean up direction to +z; errors without images or points.
-fn upright(model: &ColmapModel) -> Result<DMat3> {
+/// The rotation turning the up direction `up` asks for to +z, and where up came from; errors
+/// without images or points.
+fn upright(model: &ColmapModel, up: UpFrom) -> Result<(DMat3, UpFrom)> {
     if model.images.is_empty() || model.points.is_empty() {
         return Err(invalid(
             "COLMAP model",
@@ -129,16 +123,9 @@ fn upright(model: &ColmapModel) -> Result<DMat3> {
             ),
         ));
     }
-    let up: DVec3 = model
-        .images
-        .iter()
-        .map(|image| image.camera_to_world().y_axis.truncate())
-        .sum::<DVec3>()
-        .normalize_or_zero();
-    Ok(if up == DVec3::ZERO {
-        DMat3::IDENTITY
-    } else {
-        rotation_between(up, DVec3::Z)
+    Ok(match up_direction(model, up) {
+        Some((direction, used)) => (rotation_between(direction, DVec3::Z), used),
+        None => (DMat3::IDENTITY, UpFrom::Cameras),
     })
 }
 
@@ -242,7 +229,7 @@ impl MaskedView<'_> {
 }
 
 /// Per axis the [`POINT_PERCENTILES`] of `points`.
-fn central_box(points: &[DVec3]) -> (DVec3, DVec3) {
+pub(super) fn central_box(points: &[DVec3]) -> (DVec3, DVec3) {
     let mut low = DVec3::ZERO;
     let mut high = DVec3::ZERO;
     for axis in 0..3 {
@@ -264,6 +251,9 @@ pub struct ImportOptions {
     /// when the name has another extension), white on the scene, black elsewhere; `None`: the
     /// photos' own alpha channel.
     pub masks: Option<PathBuf>,
+    /// Which way is up ([`up_direction`]): the ground plane's normal where credible (the
+    /// default), or the cameras' mean up.
+    pub up: UpFrom,
 }
 
 /// What [`import`] wrote.
@@ -344,7 +334,7 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
             alpha: photo.pixels().map(|p| p[3]).collect(),
         })
         .collect();
-    let placement = Placement::of_foreground(&model, &foreground)?;
+    let placement = Placement::of_foreground(&model, &foreground, options.up)?;
     create_dir(&out.join("images"))?;
     let transforms_path = out.join("transforms.json");
     radiance_volume::io::remove_file_if_exists(&transforms_path)?;

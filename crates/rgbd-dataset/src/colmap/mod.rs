@@ -28,8 +28,10 @@
 mod binary;
 mod import;
 mod text;
+mod up;
 
 pub use import::{import, Foreground, ImportOptions, ImportSummary, Placement, UndistortedCamera};
+pub use up::{cameras_up, ground_plane, up_direction, UpFrom};
 
 use std::collections::BTreeMap;
 use std::fmt;

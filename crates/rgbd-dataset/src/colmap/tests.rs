@@ -1,6 +1,6 @@
 use std::path::Path;
 
-use glam::{DMat4, DVec3};
+use glam::{DMat3, DMat4, DQuat, DVec3};
 
 use super::binary::write;
 use super::*;
@@ -298,4 +298,93 @@ fn every_undistorted_model_gives_its_intrinsics_and_lens() {
     }
     let full = camera(CameraModel::FullOpenCv, &[0.0; 12]);
     assert_eq!(full.lens(), None);
+}
+
+/// A model whose cameras look down from a ring above a tilted ground (points on the plane and,
+/// above it, on a few boxes' faces), and another whose points float on a sphere.
+fn ground_model(ground: bool) -> (ColmapModel, DVec3) {
+    let normal = DVec3::new(0.2, -0.1, 1.0).normalize();
+    let (u, v) = normal.any_orthonormal_pair();
+    let mut points = Vec::new();
+    let mut push = |p: DVec3| {
+        points.push(ColmapPoint {
+            id: points.len() as u64 + 1,
+            position: p.to_array(),
+            colour: [0; 3],
+            error: 0.5,
+            track_length: 3,
+        })
+    };
+    for i in 0..400 {
+        let (a, b) = ((i % 20) as f64 / 10.0 - 1.0, (i / 20) as f64 / 10.0 - 1.0);
+        if ground {
+            push(a * u + b * v);
+            // A box's side: upright on the ground, a tenth as many points.
+            if i % 10 == 0 {
+                push(0.3 * u + 0.2 * a * v + (0.2 + 0.2 * b) * normal);
+            }
+        } else {
+            let (theta, phi) = (a * 3.0, b * 1.5);
+            push(DVec3::new(
+                theta.cos() * phi.cos(),
+                theta.sin() * phi.cos(),
+                phi.sin(),
+            ));
+        }
+    }
+    let mut images = Vec::new();
+    for k in 0..8 {
+        let angle = k as f64 * std::f64::consts::TAU / 8.0;
+        let centre = 3.0 * normal + 2.5 * (angle.cos() * u + angle.sin() * v);
+        // Looking at the origin, up along the normal: COLMAP's camera y points down.
+        let forward = (-centre).normalize();
+        let right = forward.cross(normal).normalize();
+        let down = forward.cross(right);
+        let w2c = DMat3::from_cols(right, down, forward).transpose();
+        let q = DQuat::from_mat3(&w2c);
+        images.push(ColmapImage {
+            id: k + 1,
+            rotation: [q.w, q.x, q.y, q.z],
+            translation: (-(w2c * centre)).to_array(),
+            camera_id: 1,
+            name: format!("{k}.png"),
+        });
+    }
+    let model = ColmapModel {
+        cameras: BTreeMap::new(),
+        images,
+        points,
+    };
+    (model, normal)
+}
+
+#[test]
+fn up_comes_from_the_ground_plane_where_there_is_one() {
+    let (model, normal) = ground_model(true);
+    let (found, share) = ground_plane(&model).unwrap();
+    assert!(found.angle_between(normal).to_degrees() < 0.01, "{found}");
+    assert!((share - 400.0 / 440.0).abs() < 0.01, "{share}");
+    let (up, from) = up_direction(&model, UpFrom::Ground).unwrap();
+    assert_eq!((up, from), (found, UpFrom::Ground));
+    // The cameras' mean up: their ring is even here, so it is the normal too (the ring tilts
+    // every camera's up towards the middle by the same angle).
+    let cameras = cameras_up(&model).unwrap();
+    assert!(
+        cameras.angle_between(normal).to_degrees() < 1e-6,
+        "{cameras}"
+    );
+    assert_eq!(
+        up_direction(&model, UpFrom::Cameras).unwrap().1,
+        UpFrom::Cameras
+    );
+    // Points on a sphere hold no plane worth the name: the cameras' up is used.
+    let (floating, _) = ground_model(false);
+    let (up, from) = up_direction(&floating, UpFrom::Ground).unwrap();
+    assert_eq!(from, UpFrom::Cameras);
+    assert!(up.angle_between(normal).to_degrees() < 1e-6);
+    assert_eq!("cameras".parse::<UpFrom>(), Ok(UpFrom::Cameras));
+    assert!("sky"
+        .parse::<UpFrom>()
+        .unwrap_err()
+        .contains("ground or cameras"));
 }
