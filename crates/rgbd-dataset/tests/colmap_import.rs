@@ -247,6 +247,19 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
         err.contains("FULL_OPENCV") && err.contains("image_undistorter"),
         "{err}"
     );
+    // ... but only where a registered image uses it: a camera no image refers to (of an
+    // image the mapper dropped), of another size and model, is not looked at.
+    write_model(
+        &data,
+        &model,
+        &format!(
+            "{}\n2 FULL_OPENCV 99 77 20 20 12 12 0.1 0 0 0 0 0 0 0",
+            pinhole(&data)
+        ),
+    );
+    let summary = import(&model, &with, &out).unwrap();
+    assert_eq!((summary.width, summary.height), (SIZE as u32, SIZE as u32));
+    assert!(summary.undistorted.is_empty());
     // A missing photo names its file.
     let elsewhere = ImportOptions {
         images: tmp.path().join("nowhere"),

@@ -290,9 +290,14 @@ pub struct UndistortedCamera {
 pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<ImportSummary> {
     let model = ColmapModel::read(model_dir)?;
     let size = common_size(&model, model_dir)?;
+    // Only the cameras of registered images: a model may hold others (of images the mapper
+    // dropped), whose sizes and lenses the dataset never sees.
     let mut undistortions = BTreeMap::new();
-    for camera in model.cameras.values() {
-        undistortions.insert(camera.id, undistortion(camera, model_dir)?);
+    for image in &model.images {
+        if !undistortions.contains_key(&image.camera_id) {
+            let camera = &model.cameras[&image.camera_id];
+            undistortions.insert(camera.id, undistortion(camera, size, model_dir)?);
+        }
     }
     let photos = model
         .images
@@ -389,15 +394,14 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
         width: size.0,
         height: size.1,
         placement,
-        undistorted: model
-            .cameras
-            .values()
-            .filter(|camera| !undistortions[&camera.id].is_identity())
-            .map(|camera| UndistortedCamera {
-                id: camera.id,
-                model: camera.model,
-                photo: undistortions[&camera.id].photo(),
-                pinhole: undistortions[&camera.id].pinhole(),
+        undistorted: undistortions
+            .iter()
+            .filter(|(_, undistortion)| !undistortion.is_identity())
+            .map(|(id, undistortion)| UndistortedCamera {
+                id: *id,
+                model: model.cameras[id].model,
+                photo: undistortion.photo(),
+                pinhole: undistortion.pinhole(),
             })
             .collect(),
     })
@@ -435,10 +439,9 @@ fn common_size(model: &ColmapModel, dir: &Path) -> Result<(u32, u32)> {
     }
 }
 
-/// How `camera`'s photos become pinhole ones; models volgen does not undistort are refused
-/// naming the model.
-fn undistortion(camera: &ColmapCamera, dir: &Path) -> Result<Undistortion> {
-    let size = (camera.width as u32, camera.height as u32);
+/// How `camera`'s photos, of the checked common `size`, become pinhole ones; models volgen does
+/// not undistort are refused naming the model.
+fn undistortion(camera: &ColmapCamera, size: (u32, u32), dir: &Path) -> Result<Undistortion> {
     let Some((intrinsics, lens)) = camera.lens() else {
         return Err(model_error(
             dir.to_path_buf(),
