@@ -33,6 +33,15 @@ fi
 # driver come from the machine; copies put in that lib/ folder are found too).
 export LD_LIBRARY_PATH="$(dirname "$VOLGEN")/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 MISSING=$(ldd "$VOLGEN" | awk '/not found/ {print $1}' | tr '\n' ' ')
+# Machines with PyTorch for CUDA 13 (as the project's GPU machine, 2026-12-04) hold cuBLAS and
+# cuRAND in its `nvidia` wheels rather than in the system's library path.
+if [ -n "$MISSING" ] && command -v python3 > /dev/null; then
+  WHEELS=$(python3 -c 'import nvidia, os; print(os.path.join(list(nvidia.__path__)[0], "cu13", "lib"))' 2> /dev/null || true)
+  if [ -n "$WHEELS" ] && [ -d "$WHEELS" ]; then
+    export LD_LIBRARY_PATH="$LD_LIBRARY_PATH:$WHEELS"
+    MISSING=$(ldd "$VOLGEN" | awk '/not found/ {print $1}' | tr '\n' ' ')
+  fi
+fi
 if [ -n "$MISSING" ]; then
   echo "{\"check\": \"libraries\", \"ok\": false, \"missing\": \"${MISSING% }\", \"note\": \"install CUDA 13 (driver R580+, cuBLAS, cuRAND) or put the libraries in $(dirname "$VOLGEN")/lib\"}"
   exit 1

@@ -61,6 +61,17 @@ pub enum Error {
         /// The sum of the gradient's elements.
         value: f32,
     },
+    /// A computation of a training run failed (a tensor operation, the renderer, a device's
+    /// driver): where in the run, and the error.
+    #[error("scale {scale}, {at}: {source}")]
+    Training {
+        /// The scale (1-based).
+        scale: usize,
+        /// Where in the scale: `set-up`, `iteration 12`, `pictures`.
+        at: String,
+        /// The error.
+        source: Box<Error>,
+    },
     /// An error from radiance-volume.
     #[error(transparent)]
     Volume(#[from] radiance_volume::Error),

@@ -193,7 +193,9 @@ impl<'a> Trainer<'a> {
             return Err(invalid("scale", "every scale is trained already"));
         }
         let mut setup = step_rng(self.config.run.seed, n, SETUP_STREAM);
-        let level = self.grow_model(n, &mut setup)?;
+        let level = self
+            .grow_model(n, &mut setup)
+            .map_err(|e| located(e, n, "set-up"))?;
         let restore = self.restore.take();
         let inputs = StageInputs {
             dataset: &self.dataset,
@@ -203,7 +205,8 @@ impl<'a> Trainer<'a> {
             depth_norm: self.state.depth_norm,
             device: &self.device,
         };
-        let mut stage = stage(&self.model, n, level, inputs, &mut setup)?;
+        let mut stage = stage(&self.model, n, level, inputs, &mut setup)
+            .map_err(|e| located(e, n, "set-up"))?;
         let checkpoint_file = self.checkpoint_file.clone();
         if let Some(tensors) = restore {
             stage.parts().restore(
@@ -226,7 +229,7 @@ impl<'a> Trainer<'a> {
                     it >= schedule.reconstruction_only,
                     &mut step_rng(self.config.run.seed, n, it),
                 )
-                .map_err(|e| diverged(e, n, it))?;
+                .map_err(|e| located(diverged(e, n, it), n, &format!("iteration {it}")))?;
             check_finite(&losses, n, it)?;
             let state = &mut self.state;
             state.current_seconds += started.elapsed().as_secs_f64();
@@ -262,10 +265,12 @@ impl<'a> Trainer<'a> {
         }
         let picture = picture_path(&self.run_dir, n);
         crate::io::create_dir(picture.parent().unwrap_or(&self.run_dir))?;
-        let rows = stage.picture_rows(
-            &mut step_rng(self.config.run.seed, n, PICTURE_STREAM),
-            PICTURE_SAMPLES,
-        )?;
+        let rows = stage
+            .picture_rows(
+                &mut step_rng(self.config.run.seed, n, PICTURE_STREAM),
+                PICTURE_SAMPLES,
+            )
+            .map_err(|e| located(e, n, "pictures"))?;
         crate::picture::write_grid(&picture, &rows)?;
         self.previous_critics = stage.parts().critic_tensors();
         drop(stage);
@@ -626,6 +631,26 @@ fn diverged(error: Error, n: usize, it: usize) -> Error {
     }
 }
 
+/// A computation's error at scale `n` as [`Error::Training`], naming where it happened (a
+/// device error says nothing of that itself); errors that name their cause already (a file, a
+/// setting, a divergence) pass unchanged.
+fn located(error: Error, n: usize, at: &str) -> Error {
+    match error {
+        Error::Candle(_)
+        | Error::Render(_)
+        | Error::Gan(_)
+        | Error::Swd(_)
+        | Error::Volume(_)
+        | Error::Metrics(_)
+        | Error::Csg(_) => Error::Training {
+            scale: n,
+            at: at.into(),
+            source: Box::new(error),
+        },
+        other => other,
+    }
+}
+
 /// The test hook [`RunOptions::poison`]: sets every weight of scale `n`'s generator (or the
 /// upsampler) to NaN, as a divergence would.
 fn poison(model: &SinGrav, n: usize) -> Result<()> {
@@ -677,4 +702,44 @@ fn check_same_config(saved: &TrainConfig, wanted: &TrainConfig, path: &Path) -> 
             settings_that_differ(saved, wanted).join(", ")
         ),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{diverged, located};
+    use crate::error::{invalid, Error};
+
+    /// A device's error (candle's, as a driver's reaches training) names the scale and the
+    /// place; errors that name their cause already pass through.
+    #[test]
+    fn computation_errors_say_where_in_the_run_they_happened() {
+        let driver = Error::Candle(candle_core::Error::Msg(
+            "DriverError(CUDA_ERROR_INVALID_VALUE, \"invalid argument\")".into(),
+        ));
+        let err = located(diverged(driver, 4, 0), 4, "iteration 0");
+        assert!(matches!(err, Error::Training { scale: 4, .. }), "{err:?}");
+        assert!(
+            err.to_string()
+                .starts_with("scale 4, iteration 0: DriverError(CUDA_ERROR_INVALID_VALUE"),
+            "{err}"
+        );
+        let setting = located(invalid("losses.rgb", "expected >= 0"), 2, "set-up");
+        assert!(matches!(setting, Error::Invalid { .. }), "{setting:?}");
+        let nan = Error::NonFiniteGradient {
+            parameter: "g2.w".into(),
+            value: f32::NAN,
+        };
+        let err = located(diverged(nan, 2, 7), 2, "iteration 7");
+        assert!(
+            matches!(
+                err,
+                Error::Diverged {
+                    scale: 2,
+                    step: 7,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+    }
 }
