@@ -19,7 +19,7 @@ use volrender::{render, Rays, RenderConfig, RenderOutput, Sampler};
 
 const EPSILONS: [f32; 4] = [0.0, 1e-4, 1e-3, 1e-2];
 const RANDOM_VOLUMES: usize = 3;
-const TIMED_RUNS: usize = 3;
+const TIMED_RUNS: usize = 4;
 
 /// Forward and backward of one rendering: the outputs and the volume's gradient.
 fn render_with_gradient(
@@ -120,18 +120,23 @@ fn main() {
                 .with_depth(true)
                 .with_opacity(true)
                 .with_density(config.density_interpolation());
-            // Median of alternating timed runs, so a slow moment hits every epsilon alike.
+            // An untimed render of each epsilon first (its results kept), then the median of
+            // timed runs in an order that rotates each round, so neither a slow moment nor
+            // coming first (cold caches, fresh allocations) falls on one epsilon alone.
+            let results: Vec<_> = EPSILONS
+                .iter()
+                .map(|&epsilon| {
+                    render_with_gradient(&physical, &rays, &base.with_epsilon(epsilon), &probe)
+                })
+                .collect();
             let mut seconds = vec![Vec::new(); EPSILONS.len()];
-            let mut results = Vec::new();
             for run in 0..TIMED_RUNS {
-                for (e, &epsilon) in EPSILONS.iter().enumerate() {
-                    let config = base.with_epsilon(epsilon);
+                for k in 0..EPSILONS.len() {
+                    let e = (k + run) % EPSILONS.len();
+                    let config = base.with_epsilon(EPSILONS[e]);
                     let started = Instant::now();
-                    let result = render_with_gradient(&physical, &rays, &config, &probe);
+                    render_with_gradient(&physical, &rays, &config, &probe);
                     seconds[e].push(started.elapsed().as_secs_f64());
-                    if run == 0 {
-                        results.push(result);
-                    }
                 }
             }
             let median = |s: &mut Vec<f64>| {

@@ -224,13 +224,6 @@ pub struct Rendering {
     /// --upsample` writes post-activated runs' on a finer grid
     /// ([`SinGrav::to_physical_upsampled`](crate::SinGrav::to_physical_upsampled)).
     pub post_activation: bool,
-    /// Early ray termination in every rendering of the model (training's and the outputs'):
-    /// a ray stops once its transmittance is at most `epsilon`
-    /// ([`volrender::RenderConfig::epsilon`]), which changes colour and opacity by at most
-    /// `epsilon` and skips the samples behind matter. 0 (runs from before it, `paper`, `small`,
-    /// `micro`): exact. `tiny`: 1e-4 (docs/training.md has its time and error).
-    #[serde(default)]
-    pub epsilon: f32,
 }
 
 /// Where the finer 3D scales' generators may change the volume (see [`crate::active_set`]).
@@ -495,16 +488,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("c.json") && err.contains("JSON"), "{err}");
-    }
-
-    #[test]
-    fn a_configuration_from_before_early_termination_renders_exactly() {
-        // Runs of the same version written before `rendering.epsilon` existed.
-        let mut json = serde_json::to_value(TrainConfig::preset("tiny").unwrap()).unwrap();
-        json["rendering"].as_object_mut().unwrap().remove("epsilon");
-        let config = TrainConfig::from_json(&json.to_string(), "config.json").unwrap();
-        assert_eq!(config.rendering.epsilon, 0.0);
-        assert_eq!(TrainConfig::preset("tiny").unwrap().rendering.epsilon, 1e-4);
     }
 
     #[test]

@@ -69,13 +69,6 @@ const TINY_VOLUME_CRITIC: f64 = 0.3;
 /// The last scale `tiny`'s 3D critic judges: the coarsest, where the layout is made.
 const TINY_VOLUME_CRITIC_UNTIL: usize = 1;
 
-/// `tiny`'s early ray termination ([`Rendering::epsilon`]): on a trained `tiny` run's V* and
-/// samples, rendered as its generator steps render them (10 views, forward and backward),
-/// colour and opacity change by at most 1e-4 (a fortieth of an 8-bit level), the volume's
-/// gradient by 2.4e-4 to 3.8e-4 (relative L2), and the renderer takes 0.76-0.90x the time
-/// (1e-3: 10x the error for about the same time; research `early_termination`, 2026-12-04).
-const TINY_EPSILON: f32 = 1e-4;
-
 /// Weight of the colour-distribution loss in every preset ([`Losses::colour_distribution`]).
 const LAMBDA_COLOUR: f64 = 20.0;
 
@@ -118,9 +111,8 @@ impl TrainConfig {
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
     ///   5x the paper's, the samples' height profile, optimised reconstruction noise z*_n, the
-    ///   binary-opacity prior with the chroma-distribution loss on its samples,
-    ///   post-activated density, early ray termination at a transmittance of 1e-4, and a 3D
-    ///   critic of the coarsest volumes as seen from above
+    ///   binary-opacity prior with the chroma-distribution loss on its samples, and
+    ///   post-activated density, and a 3D critic of the coarsest volumes as seen from above
     ///   (which needs a fit of the dataset's views, made first); 10 to 14 minutes of training
     ///   on 2 CPU cores (an Intel Xeon with AVX-512, 2026-12-02).
     /// - `micro`: N = 3, 8^3 and 11^3 volumes, for tests (seconds); dense finer scale.
@@ -147,9 +139,6 @@ impl TrainConfig {
                 // Sharper edges than a voxel: V* +2.8 dB, the samples' patches and colours
                 // closer on both scenes measured.
                 tiny.rendering.post_activation = true;
-                // Rays stop behind matter: the renderer 0.76-0.90x the time at 1e-4 of colour
-                // and opacity (research `early_termination`).
-                tiny.rendering.epsilon = TINY_EPSILON;
                 // The scene's arrangement (see `TINY_VOLUME_CRITIC`).
                 tiny.losses.volume_critic = TINY_VOLUME_CRITIC;
                 tiny.critics.volume_until_scale = Some(TINY_VOLUME_CRITIC_UNTIL);
@@ -232,7 +221,6 @@ fn paper() -> TrainConfig {
             density_shift: -4.0,
             background: [1.0, 1.0, 1.0],
             post_activation: false,
-            epsilon: 0.0,
         },
         active_set: ActiveSet {
             from_scale: Some(SPARSE_FROM_SCALE),
@@ -419,18 +407,15 @@ mod tests {
             .all(|s| s.reconstruction_only * 4 == s.iterations));
         // Everything but the sizes, the schedule, the binary-opacity prior (which cost small
         // colour, V* and diversity), the chroma loss that goes with it, the post-activated
-        // density, the 3D critic of the layout and early ray termination (measured on tiny
-        // only) is tiny's.
+        // density and the 3D critic of the layout (measured on tiny only) is tiny's.
         assert_eq!(small.losses.opacity_binary, 0.0);
         assert_eq!(small.losses.chroma_distribution, 0.0);
         assert!(!small.rendering.post_activation);
-        assert_eq!(small.rendering.epsilon, 0.0);
         assert_eq!(small.losses.volume_critic, 0.0);
         let mut resized = small.clone();
         resized.losses.opacity_binary = tiny.losses.opacity_binary;
         resized.losses.chroma_distribution = tiny.losses.chroma_distribution;
         resized.rendering.post_activation = tiny.rendering.post_activation;
-        resized.rendering.epsilon = tiny.rendering.epsilon;
         resized.losses.volume_critic = tiny.losses.volume_critic;
         resized.critics = tiny.critics.clone();
         resized.preset = tiny.preset.clone();

@@ -235,15 +235,6 @@ impl TrainConfig {
                 "need a positive density scale, a finite shift and a background in [0, 1]",
             ));
         }
-        if !(0.0..1.0).contains(&rendering.epsilon) {
-            return Err(invalid(
-                "rendering.epsilon",
-                format!(
-                    "expected a transmittance 0 <= epsilon < 1, got {}",
-                    rendering.epsilon
-                ),
-            ));
-        }
         let noise = &self.noise;
         check_non_negative(
             "noise.amplitude_factor",
@@ -333,8 +324,6 @@ mod tests {
             ("run.holdout", "1"),
             ("critics.volume_until_scale", "0"),
             ("critics.volume_until_scale", "3"),
-            ("rendering.epsilon", "-0.001"),
-            ("rendering.epsilon", "1"),
         ] {
             let err = micro
                 .clone()
