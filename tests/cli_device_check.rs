@@ -75,6 +75,8 @@ fn every_check_but_tiny_passes_on_the_cpu_with_one_json_line_each() {
     assert_eq!(scales.len(), 1);
     assert_eq!(scales[0]["volume"], 40);
     assert!(scales[0]["iteration_s"].as_f64().unwrap() > 0.0);
+    // A GPU's memory in use is reported per scale; the CPU has none to report.
+    assert!(scales[0]["device_memory_mib"].is_null(), "{}", scales[0]);
 }
 
 #[test]

@@ -26,6 +26,9 @@ struct Record {
     steps: Vec<(usize, f64, StepLosses)>,
     /// (scale, seconds) of every finished scale.
     scales: Vec<(usize, f64)>,
+    /// (scale, the device's memory in use in MiB) at the end of every scale and where the run
+    /// was stopped (on a GPU).
+    memory: Vec<(usize, u64)>,
     /// Iterations of the whole run.
     total_iterations: usize,
     /// Whether the run was stopped before its end, and why.
@@ -49,28 +52,68 @@ fn record_training(
     let mut observer = |p: &Progress| {
         match &p.event {
             Event::Step => record.steps.push((p.scale, p.scale_seconds, p.losses)),
-            Event::ScaleDone(_) => record.scales.push((p.scale, p.scale_seconds)),
+            Event::ScaleDone(_) => {
+                record.scales.push((p.scale, p.scale_seconds));
+                record
+                    .memory
+                    .extend(device_memory_used_mib(device).map(|m| (p.scale, m)));
+            }
             _ => {}
         }
         if matches!(p.event, Event::Step) {
             if let Some(why) = stop(p) {
                 record.stopped = Some(why);
+                record
+                    .memory
+                    .extend(device_memory_used_mib(device).map(|m| (p.scale, m)));
                 return Control::Stop;
             }
         }
         Control::Continue
     };
-    train(
+    let trained = train(
         config,
         dataset,
         run_dir,
         &RunOptions::default(),
         device,
         &mut observer,
-    )
-    .with_context(|| format!("training `{}` into {}", config.preset, run_dir.display()))?;
+    );
+    if let Err(error) = trained {
+        // What the device held as the run went on: a driver's error about memory says no more.
+        let memory: Vec<String> = record
+            .memory
+            .iter()
+            .map(|(n, mib)| format!("scale {n} {mib} MiB"))
+            .collect();
+        let held = if memory.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (device memory in use after each finished scale: {})",
+                memory.join(", ")
+            )
+        };
+        return Err(anyhow::Error::new(error).context(format!(
+            "training `{}` into {}{held}",
+            config.preset,
+            run_dir.display()
+        )));
+    }
     record.seconds = started.elapsed().as_secs_f64();
     Ok(record)
+}
+
+/// The device's memory in use in MiB as its driver counts it (what candle's CUDA memory pool
+/// holds, not only live tensors); `None` on the CPU.
+fn device_memory_used_mib(device: &Device) -> Option<u64> {
+    #[cfg(feature = "cuda")]
+    if let Ok(cuda) = device.as_cuda_device() {
+        let (free, total) = cuda.cuda_stream().context().mem_get_info().ok()?;
+        return Some(((total - free) >> 20) as u64);
+    }
+    let _ = device;
+    None
 }
 
 /// The stones scene's dataset for `config` (at its final image size) in `dir`, loaded as
@@ -179,12 +222,14 @@ pub fn paper_iterations(cx: &CheckContext) -> Result<Map<String, Value>> {
         let Some(&first) = times.first() else { break };
         let later: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
         let size = |sizes: &[usize]| sizes.get(n - 1).copied();
+        let memory = record.memory.iter().find(|m| m.0 == n).map(|m| m.1);
         scales.push(json!({
             "scale": n,
             "volume": size(&config.pyramid.volume_sizes),
             "image": size(&config.pyramid.image_sizes).unwrap_or(config.final_image_size()),
             "first_iteration_s": round(first, 3),
             "iteration_s": later.iter().cloned().reduce(f64::min).map(|s| round(s, 3)),
+            "device_memory_mib": memory,
         }));
     }
     let mut fields = Map::new();
@@ -222,7 +267,13 @@ pub fn tiny(cx: &CheckContext) -> Result<Map<String, Value>> {
         json!(record
             .scales
             .iter()
-            .map(|(n, s)| json!({"scale": n, "seconds": round(*s, 1)}))
+            .map(|(n, s)| {
+                let mut scale = json!({"scale": n, "seconds": round(*s, 1)});
+                if let Some((_, mib)) = record.memory.iter().find(|m| m.0 == *n) {
+                    scale["device_memory_mib"] = json!(mib);
+                }
+                scale
+            })
             .collect::<Vec<_>>()),
     );
     fields.insert("training_seconds".into(), json!(round(record.seconds, 1)));
