@@ -42,16 +42,8 @@ fn render_with_gradient(
 }
 
 fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar()
-        .unwrap()
+    let diff = (a - b).and_then(|d| d.abs()?.max_all()).unwrap();
+    diff.to_scalar().unwrap()
 }
 
 fn norm(t: &Tensor) -> f64 {
