@@ -228,3 +228,122 @@ fn bad_input_is_a_clear_error_not_a_panic() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no/dir/x.vdb"));
 }
+
+/// The 4x4 (column vectors) that a VDB file's transform maps index to world by, read from its
+/// bytes as OpenVDB lays them out: an `AffineMap`'s 16 doubles (row-major for row vectors), or a
+/// `ScaleTranslateMap`'s translation and scale.
+fn vdb_index_to_world(bytes: &[u8]) -> glam::DMat4 {
+    let doubles = |at: usize, n: usize| -> Vec<f64> {
+        (0..n)
+            .map(|i| f64::from_le_bytes(bytes[at + 8 * i..at + 8 * i + 8].try_into().unwrap()))
+            .collect()
+    };
+    let find = |name: &[u8]| bytes.windows(name.len()).position(|w| w == name);
+    if let Some(at) = find(b"AffineMap") {
+        return glam::DMat4::from_cols_array(&doubles(at + 9, 16).try_into().unwrap());
+    }
+    let at = find(b"ScaleTranslateMap").unwrap() + "ScaleTranslateMap".len();
+    let v = doubles(at, 6);
+    glam::DMat4::from_translation(glam::DVec3::new(v[0], v[1], v[2]))
+        * glam::DMat4::from_scale(glam::DVec3::new(v[3], v[4], v[5]))
+}
+
+#[test]
+fn export_and_mesh_take_volumes_back_to_the_capture_frame() {
+    use glam::{DMat4, DQuat, DVec3};
+    let dir = tempfile::tempdir().unwrap();
+    let vol = small_volume(dir.path());
+    // An imported dataset's record: the capture's frame halved, turned and moved.
+    let to_dataset = DMat4::from_scale_rotation_translation(
+        DVec3::splat(0.5),
+        DQuat::from_rotation_z(1.2),
+        DVec3::new(1.0, 2.0, 3.0),
+    );
+    let rows: Vec<[f64; 4]> = (0..4).map(|r| to_dataset.row(r).to_array()).collect();
+    let dataset = dir.path().join("imported");
+    std::fs::create_dir_all(&dataset).unwrap();
+    let record = serde_json::json!({"frames": [], "volgen_import": {"capture_to_dataset": rows}});
+    std::fs::write(dataset.join("transforms.json"), record.to_string()).unwrap();
+    let to_capture = to_dataset.inverse();
+
+    let (plain, placed) = (dir.path().join("plain.vdb"), dir.path().join("placed.vdb"));
+    common::ok(&volgen(&["export", &vol, "--vdb", common::path(&plain)]));
+    let text = common::ok(&volgen(&[
+        "export",
+        &vol,
+        "--vdb",
+        common::path(&placed),
+        "--to-capture",
+        common::path(&dataset),
+    ]));
+    assert!(
+        text.contains("a unit of the dataset is 2.0000 there"),
+        "{text}"
+    );
+    // The placed file's index -> world map is the plain one's followed by the way back.
+    let plain_map = vdb_index_to_world(&std::fs::read(&plain).unwrap());
+    let placed_map = vdb_index_to_world(&std::fs::read(&placed).unwrap());
+    for index in [DVec3::ZERO, DVec3::X, DVec3::new(3.0, 5.0, 7.0)] {
+        let expected = to_capture.transform_point3(plain_map.transform_point3(index));
+        let got = placed_map.transform_point3(index);
+        assert!(
+            (got - expected).length() < 1e-9,
+            "{index}: {got} vs {expected}"
+        );
+    }
+
+    // The mesh, read by the glTF crate: the ball of radius 0.5 at the origin is one of radius
+    // 1 (the capture's units are half the dataset's) around where the origin goes back to.
+    let glb = dir.path().join("ball.glb");
+    common::ok(&volgen(&[
+        "mesh",
+        &vol,
+        "--out",
+        common::path(&glb),
+        "--to-capture",
+        common::path(&dataset),
+    ]));
+    let (document, buffers, _) = gltf::import(&glb).unwrap();
+    let positions: Vec<DVec3> = first_primitive(&document)
+        .reader(|b| Some(&buffers[b.index()]))
+        .read_positions()
+        .unwrap()
+        .map(|p| DVec3::from(p.map(f64::from)))
+        .collect();
+    let centre = positions.iter().sum::<DVec3>() / positions.len() as f64;
+    // glTF turns z-up into y-up, a rotation: distances from the origin survive it.
+    let origin_back = to_capture.transform_point3(DVec3::ZERO);
+    assert!(
+        (centre.length() - origin_back.length()).abs() < 0.05,
+        "{centre} {origin_back}"
+    );
+    for p in &positions {
+        assert!(((*p - centre).length() - 1.0).abs() < 0.3, "{p}");
+    }
+
+    // A dataset without the record, and EXR slices (axis-aligned), are refused by name.
+    let plain_data = dir.path().join("plain_data");
+    std::fs::create_dir_all(&plain_data).unwrap();
+    std::fs::write(plain_data.join("transforms.json"), r#"{"frames": []}"#).unwrap();
+    let err = common::failure(&volgen(&[
+        "mesh",
+        &vol,
+        "--out",
+        common::path(&glb),
+        "--to-capture",
+        common::path(&plain_data),
+    ]));
+    assert!(
+        err.contains("volgen_import.capture_to_dataset") && err.contains("transforms.json"),
+        "{err}"
+    );
+    let err = common::failure(&volgen(&[
+        "export",
+        &vol,
+        "--exr-slices",
+        common::path(&dir.path().join("slices")),
+        "--to-capture",
+        common::path(&dataset),
+    ]));
+    assert!(err.contains("--to-capture") && err.contains("EXR"), "{err}");
+}

@@ -325,6 +325,20 @@ fn train_refuses_unknown_depth_and_takes_the_depth_kind_flag() {
         err.contains("cameras.txt") && err.contains("missing"),
         "{err}"
     );
+    // So does `import nerfstudio`: this capture names no sparse points.
+    let err = failure(&volgen(&[
+        "import",
+        "nerfstudio",
+        path(&data),
+        "--out",
+        path(&tmp.path().join("imported")),
+    ]));
+    assert!(
+        err.contains("transforms.json")
+            && err.contains("ply_file_path")
+            && err.contains("--points"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! Which way is up in a structure-from-motion capture: the cameras' mean up direction
-//! (`rgbd_dataset::colmap::cameras_up`, nerfstudio's `orientation_method up`) against the normal
+//! (`rgbd_dataset::placement::cameras_up`, nerfstudio's `orientation_method up`) against the normal
 //! of the sparse points' dominant plane (`ground_plane`, RANSAC), each measured as the angle to
 //! the true up. The truth comes from the dataset the photos were rendered from (its +z is up):
 //! the rotation of the similarity (Umeyama on the camera centres, matched by photo name) from
@@ -11,7 +11,8 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 use research::capture::{poses, umeyama};
-use rgbd_dataset::colmap::{cameras_up, ground_plane, up_direction, ColmapModel, UpFrom};
+use rgbd_dataset::colmap::ColmapModel;
+use rgbd_dataset::placement::{cameras_up, ground_plane, up_direction, SparseCapture, UpFrom};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -47,14 +48,15 @@ fn main() {
             .acos()
             .to_degrees()
     };
-    let cameras = cameras_up(&model).expect("cameras with an up direction");
+    let capture = SparseCapture::from(&model);
+    let cameras = cameras_up(&capture).expect("cameras with an up direction");
     println!(
         "{} cameras ({} matched), {} sparse points",
         model.images.len(),
         matched.len(),
         model.points.len()
     );
-    match ground_plane(&model) {
+    match ground_plane(&capture) {
         Some((normal, share)) => println!(
             "up error: cameras' mean up {:.2} deg, ground plane's normal {:.2} deg ({:.0}% of the \
              points on it)",
@@ -67,7 +69,7 @@ fn main() {
             error(cameras)
         ),
     }
-    let (up, used) = up_direction(&model, UpFrom::Ground).expect("an up direction");
+    let (up, used) = up_direction(&capture, UpFrom::Ground).expect("an up direction");
     println!(
         "`volgen import colmap` (--up ground) uses {used}: {:.2} deg",
         error(up)

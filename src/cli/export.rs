@@ -1,10 +1,12 @@
-//! `volgen export VOLUME --vdb out.vdb --exr-slices out_dir/`: write a volume for Blender and
-//! other OpenVDB / EXR tools.
+//! `volgen export VOLUME --vdb out.vdb --exr-slices out_dir/ [--to-capture DATASET]`: write a
+//! volume for Blender and other OpenVDB / EXR tools.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use radiance_volume::RadianceVolume;
+
+use super::to_capture::CaptureFrame;
 
 /// Arguments of `volgen export`.
 #[derive(Debug, clap::Args)]
@@ -20,6 +22,11 @@ pub struct ExportArgs {
     /// Base name of the EXR slice files (default: the volume file's stem).
     #[arg(long, value_name = "NAME")]
     exr_name: Option<String>,
+    /// Write the VDB in the frame of the capture DATASET was imported from (`volgen import`
+    /// records it): an affine grid transform, density per unit length of that frame. For
+    /// volumes made in DATASET's frame (samples of a model trained on it, fits of it).
+    #[arg(long, value_name = "DATASET")]
+    to_capture: Option<PathBuf>,
     #[command(flatten)]
     encoding: Encoding,
 }
@@ -49,10 +56,24 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if args.vdb.is_none() && args.exr_slices.is_none() {
         bail!("nothing to export: give --vdb FILE and/or --exr-slices DIR");
     }
+    if args.to_capture.is_some() && args.exr_slices.is_some() {
+        bail!(
+            "--to-capture applies to --vdb: EXR slices are axis-aligned in the volume's box, \
+             which the capture's frame is turned against; export the slices without it"
+        );
+    }
     let volume = RadianceVolume::load_safetensors(&args.volume)?;
     if let Some(path) = &args.vdb {
-        write_vdb(&volume, path, &args.encoding)
-            .with_context(|| format!("exporting {} to OpenVDB", args.volume.display()))?;
+        match &args.to_capture {
+            None => write_vdb(&volume, path, &args.encoding),
+            Some(dataset) => {
+                let frame = CaptureFrame::of(dataset)?;
+                let volume = frame.density_for(&volume)?;
+                println!("writing the VDB {}", frame.describe(dataset));
+                write_vdb_placed(&volume, path, &args.encoding, Some(frame.map))
+            }
+        }
+        .with_context(|| format!("exporting {} to OpenVDB", args.volume.display()))?;
     }
     if let Some(dir) = &args.exr_slices {
         let name = match &args.exr_name {
@@ -69,10 +90,24 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     Ok(())
 }
 
-#[cfg(feature = "vdb")]
+/// Writes `volume` as OpenVDB with the encoding `args`, saying what it wrote.
 pub fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &Encoding) -> Result<()> {
-    let stats = volume
-        .write_vdb()
+    write_vdb_placed(volume, path, args, None)
+}
+
+/// [`write_vdb`], the grid placed by the affine map `placed` when given.
+#[cfg(feature = "vdb")]
+pub fn write_vdb_placed(
+    volume: &RadianceVolume,
+    path: &std::path::Path,
+    args: &Encoding,
+    placed: Option<glam::DMat4>,
+) -> Result<()> {
+    let mut writer = volume.write_vdb();
+    if let Some(map) = placed {
+        writer = writer.placed(map);
+    }
+    let stats = writer
         .half(args.half)
         .zlib(args.zlib)
         .threshold(args.threshold)
@@ -90,7 +125,12 @@ pub fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &Encodin
 }
 
 #[cfg(not(feature = "vdb"))]
-pub fn write_vdb(_: &RadianceVolume, _: &std::path::Path, _: &Encoding) -> Result<()> {
+pub fn write_vdb_placed(
+    _: &RadianceVolume,
+    _: &std::path::Path,
+    _: &Encoding,
+    _: Option<glam::DMat4>,
+) -> Result<()> {
     bail!("this volgen was built without the `vdb` feature; rebuild with `--features vdb`")
 }
 

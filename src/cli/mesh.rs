@@ -1,5 +1,6 @@
-//! `volgen mesh VOLUME --out FILE.glb|.gltf|.ply|.obj [--level L] [--smooth N] [--decimate F]`:
-//! a volume's surface as a coloured triangle mesh, in the volume's own coordinates; and the
+//! `volgen mesh VOLUME --out FILE.glb|.gltf|.ply|.obj [--level L] [--smooth N] [--decimate F]
+//! [--to-capture DATASET]`: a volume's surface as a coloured triangle mesh, in the volume's own
+//! coordinates (or its capture's); and the
 //! `--mesh` outputs of the commands that write volumes (`--mesh-level`, `--mesh-smooth`,
 //! `--mesh-decimate`).
 
@@ -8,6 +9,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use radiance_volume::RadianceVolume;
 use volume_mesh::{Mesh, MeshFormat, MeshOptions, DEFAULT_LEVEL};
+
+use super::to_capture::CaptureFrame;
 
 /// Arguments of `volgen mesh`.
 #[derive(Debug, clap::Args)]
@@ -29,6 +32,11 @@ pub struct MeshArgs {
     /// 0.25 writes a file a quarter the size that matches the volume as well (docs/formats.md).
     #[arg(long, value_name = "F", default_value_t = 1.0, value_parser = triangle_share)]
     decimate: f32,
+    /// Write the mesh in the frame of the capture DATASET was imported from (`volgen import`
+    /// records it). For volumes made in DATASET's frame (samples of a model trained on it,
+    /// fits of it).
+    #[arg(long, value_name = "DATASET")]
+    to_capture: Option<PathBuf>,
 }
 
 /// How the meshes of `--mesh` are made, on the commands that write volumes.
@@ -123,8 +131,16 @@ pub fn run(args: &MeshArgs) -> Result<()> {
         smooth: args.smooth,
         decimate: args.decimate,
     };
-    let mesh = write_mesh(&volume, &args.out, shape)
-        .with_context(|| format!("meshing {}", args.volume.display()))?;
+    let mut mesh =
+        mesh_of(&volume, shape).with_context(|| format!("meshing {}", args.volume.display()))?;
+    if let Some(dataset) = &args.to_capture {
+        let frame = CaptureFrame::of(dataset)?;
+        mesh = mesh
+            .transformed(frame.map)
+            .context("the capture's frame is not an invertible map")?;
+        println!("writing the mesh {}", frame.describe(dataset));
+    }
+    mesh.write(&args.out)?;
     println!(
         "wrote {} vertices, {} triangles ({}, {} non-manifold edges, area {:.4}) at opacity \
          level {}: {}",
@@ -142,9 +158,16 @@ pub fn run(args: &MeshArgs) -> Result<()> {
 /// The surface of `volume` as `shape` asks, written to `path` (its extension picks the
 /// format).
 pub fn write_mesh(volume: &RadianceVolume, path: &Path, shape: MeshShape) -> Result<Mesh> {
-    let mesh = Mesh::from_volume(volume, &MeshOptions { level: shape.level })?
-        .smoothed(shape.smooth)
-        .decimated(shape.decimate)?;
+    let mesh = mesh_of(volume, shape)?;
     mesh.write(path)?;
     Ok(mesh)
+}
+
+/// The surface of `volume` as `shape` asks.
+fn mesh_of(volume: &RadianceVolume, shape: MeshShape) -> Result<Mesh> {
+    Ok(
+        Mesh::from_volume(volume, &MeshOptions { level: shape.level })?
+            .smoothed(shape.smooth)
+            .decimated(shape.decimate)?,
+    )
 }

@@ -22,6 +22,7 @@ mod render;
 mod sample;
 mod scene;
 mod scene_boxes;
+mod to_capture;
 mod train;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.

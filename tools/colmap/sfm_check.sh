@@ -13,6 +13,11 @@
 #      depth either way, held-out views every 10th): the imported fit's held-out PSNR must be within
 #      MARGIN_DB of the true one's,
 #   5. volgen train --preset micro on the imported dataset and volgen sample from it.
+#   With NERFSTUDIO=1, also: nerfstudio's own conversion of the model (tools/colmap/
+#   nerfstudio_convert.py: nerfstudio 1.1.5 from PyPI without its dependencies, run by the peer
+#   venv's Python, ../shared/peer/setup.sh, which has torch), `volgen import nerfstudio` of its
+#   transforms.json, the same pose check, a placement scale within 2% of the COLMAP import's
+#   and a fit within 1 dB of its held-out PSNR.
 # Minutes (mostly the two fits), so not in `cargo test`: run it by hand, or in CI when time allows.
 #
 #   tools/colmap/sfm_check.sh [WORKDIR]
@@ -20,7 +25,8 @@
 # Needs Debian's colmap (apt-get install colmap) and bpy (../shared/validators/setup.sh).
 # Environment: PYTHON (the validators' venv), VOLGEN (cargo's release binary), VIEWS (40),
 # SIZE (192), MAX_ROT (2), MAX_CENTRE (0.03), MARGIN_DB (4), LENS (pinhole or opencv),
-# LENS_COEFFS ("-0.15 0.04 0.001 -0.0008": k1 k2 p1 p2).
+# LENS_COEFFS ("-0.15 0.04 0.001 -0.0008": k1 k2 p1 p2), NERFSTUDIO (0 or 1), PEER_VENV
+# (/tmp/peer/venv).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -92,6 +98,33 @@ print(f"held-out PSNR: true poses {true:.2f} dB, COLMAP's {imported:.2f} dB")
 if imported < true - margin:
     sys.exit(f"COLMAP's poses fit {true - imported:.2f} dB worse than the true ones (margin {margin} dB)")
 PY
+
+if [ "${NERFSTUDIO:-0}" = "1" ]; then
+  echo "== nerfstudio's conversion of the model, imported"
+  PEER_VENV="${PEER_VENV:-/tmp/peer/venv}"
+  VENV="$PEER_VENV" bash "$root/../shared/peer/setup.sh" > /dev/null
+  "$PEER_VENV/bin/pip" install -q --target "$work/nerfstudio_pkgs" nerfstudio==1.1.5 --no-deps
+  "$PEER_VENV/bin/pip" install -q --target "$work/nerfstudio_pkgs" rich appdirs requests packaging imageio opencv-python-headless
+  rm -rf "$work/nerfstudio" "$work/imported_ns" && mkdir -p "$work/nerfstudio"
+  cp -r "$photos" "$work/nerfstudio/images"
+  PYTHONPATH="$work/nerfstudio_pkgs" "$PEER_VENV/bin/python" "$here/nerfstudio_convert.py" "$work/sparse/0" "$work/nerfstudio"
+  "$VOLGEN" import nerfstudio "$work/nerfstudio" --out "$work/imported_ns"
+  "$ALIGN" "$work/blender" "$work/imported_ns" "$MAX_ROT" "$MAX_CENTRE"
+  "$VOLGEN" fit "$work/imported_ns" --out "$work/fit_imported_ns.safetensors" --holdout 10 | tail -2
+  python3 - "$work" <<'PY'
+import json, sys
+work = sys.argv[1]
+scale = lambda d: json.load(open(f"{work}/{d}/transforms.json"))["volgen_import"]["scale"]
+held = lambda name: json.load(open(f"{work}/{name}.fit.json"))["held_out_psnr"]
+colmap, ns = scale("imported"), scale("imported_ns")
+print(f"placement scale: COLMAP import {colmap:.4f}, nerfstudio import {ns:.4f}")
+print(f"held-out PSNR: COLMAP import {held('fit_imported'):.2f} dB, nerfstudio import {held('fit_imported_ns'):.2f} dB")
+if abs(ns / colmap - 1) > 0.02:
+    sys.exit("the two imports of one reconstruction placed it differently")
+if abs(held("fit_imported_ns") - held("fit_imported")) > 1.0:
+    sys.exit("the two imports of one reconstruction fit more than 1 dB apart")
+PY
+fi
 
 echo "== train micro and sample"
 "$VOLGEN" train "$work/imported" --out "$work/run" --preset micro --iterations 40 > "$work/train.log" 2>&1

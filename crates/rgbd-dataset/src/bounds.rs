@@ -154,7 +154,8 @@ impl Dataset {
     /// The box of the scene the depth maps show: every pixel with opacity > 0.5 and known
     /// depth is back-projected (ray distance = expected depth / opacity), the 1st and 99th
     /// percentiles of the points along each axis bound it, and it grows by 5% of its size on
-    /// every side. Errors when no pixel has depth.
+    /// every side. A capture without depth maps that names its sparse points (nerfstudio's
+    /// `ply_file_path`) is bounded by those points the same way. Errors when there is neither.
     ///
     /// ```
     /// use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
@@ -167,15 +168,33 @@ impl Dataset {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn auto_bounds(&self) -> Result<SceneBounds> {
-        if self.depth_kind == DepthKind::None {
+        let mut axes = if self.depth_kind == DepthKind::None {
+            self.sparse_points_by_axis()?
+        } else {
+            self.depth_points_by_axis()
+        };
+        if axes[0].is_empty() {
             return Err(invalid(
                 "bounds",
-                "`auto` needs depth maps, and this dataset has none (`depth_kind` \"none\"): \
-                 give the scene's box xmin,ymin,zmin,xmax,ymax,zmax in the dataset's coordinates, \
-                 or import a COLMAP capture with `volgen import colmap`, which places the scene in \
-                 the model's cube from its sparse points and the photos' foreground",
+                "`auto` found no point of the scene: no pixel has opacity > 0.5 and a known \
+                 depth (or the sparse point cloud is empty)",
             ));
         }
+        let (mut min, mut max) = ([0f32; 3], [0f32; 3]);
+        for (a, values) in axes.iter_mut().enumerate() {
+            let (lo, hi) = (
+                percentile(values, AUTO_PERCENTILE),
+                percentile(values, 100.0 - AUTO_PERCENTILE),
+            );
+            // A flat scene (a plane) still gets a box of some thickness.
+            let margin = (AUTO_MARGIN * (hi - lo)).max(1e-3 * (1.0 + lo.abs().max(hi.abs())));
+            (min[a], max[a]) = (lo - margin, hi + margin);
+        }
+        SceneBounds::new(min, max)
+    }
+
+    /// The x, y and z of every foreground pixel's surface point where its depth is known.
+    fn depth_points_by_axis(&self) -> [Vec<f32>; 3] {
         let mut axes: [Vec<f32>; 3] = Default::default();
         for (camera, frame) in self.cameras.iter().zip(&self.frames) {
             for (i, (&a, &d)) in frame.opacity.iter().zip(&frame.depth).enumerate() {
@@ -191,23 +210,24 @@ impl Dataset {
                 }
             }
         }
-        if axes[0].is_empty() {
+        axes
+    }
+
+    /// The x, y and z of the capture's sparse points; errors without them.
+    fn sparse_points_by_axis(&self) -> Result<[Vec<f32>; 3]> {
+        let Some(file) = &self.points_file else {
             return Err(invalid(
                 "bounds",
-                "`auto` needs depth: no pixel has opacity > 0.5 and a known depth",
+                "`auto` needs depth maps or sparse points, and this dataset has neither                  (`depth_kind` \"none\", no `ply_file_path`): give the scene's box                  xmin,ymin,zmin,xmax,ymax,zmax in the dataset's coordinates, or import the                  capture (`volgen import colmap` or `volgen import nerfstudio`), which turns it                  upright and places it in the model's cube from its sparse points and the photos'                  foreground",
             ));
+        };
+        let mut axes: [Vec<f32>; 3] = Default::default();
+        for p in crate::nerfstudio::read_points(file)? {
+            for (axis, v) in axes.iter_mut().zip(p.to_array()) {
+                axis.push(v as f32);
+            }
         }
-        let (mut min, mut max) = ([0f32; 3], [0f32; 3]);
-        for (a, values) in axes.iter_mut().enumerate() {
-            let (lo, hi) = (
-                percentile(values, AUTO_PERCENTILE),
-                percentile(values, 100.0 - AUTO_PERCENTILE),
-            );
-            // A flat scene (a plane) still gets a box of some thickness.
-            let margin = (AUTO_MARGIN * (hi - lo)).max(1e-3 * (1.0 + lo.abs().max(hi.abs())));
-            (min[a], max[a]) = (lo - margin, hi + margin);
-        }
-        SceneBounds::new(min, max)
+        Ok(axes)
     }
 
     /// The dataset with its scene moved from `bounds` into the model's cube: cameras mapped by
@@ -276,6 +296,8 @@ impl Dataset {
         Ok(Self {
             cameras,
             frames,
+            // The points are in the scene's frame, not the model's.
+            points_file: None,
             ..self.clone()
         })
     }

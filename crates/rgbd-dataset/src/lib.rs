@@ -5,6 +5,8 @@
 //! - [`write_dataset`] renders a scene into a NeRF-style RGB-D dataset; [`Dataset::load`] reads
 //!   one from disk (any tool's, within the format below); [`Dataset::level`] resizes it to a
 //!   training scale; [`SceneBounds`] places a scene that is not in the unit cube.
+//! - Captures of your own: [`colmap`] imports a COLMAP reconstruction, [`nerfstudio`] places a
+//!   nerfstudio capture; both turn the scene upright and into the model's cube ([`placement`]).
 //!
 //! # Format
 //!
@@ -36,7 +38,8 @@
 //! - nerfstudio's capture fields: `mask_path` (per frame, white on the scene; multiplies alpha)
 //!   and the lens, `camera_model` (`OPENCV`, the default, `OPENCV_FISHEYE`, `PINHOLE`) with `k1`
 //!   to `k4`, `p1`, `p2`: distorted photos are undistorted while loading ([`lens`]) into
-//!   pinhole cameras.
+//!   pinhole cameras; `ply_file_path`, the sparse points ([`nerfstudio::read_points`]), which
+//!   [`Dataset::auto_bounds`] bounds a capture without depth maps by.
 //! - `depth_file_path` (required unless `depth_kind` is `"none"`): a 16-bit grey PNG whose counts times the top-level
 //!   `depth_scale` (world units per count, required for PNG depth: millimetre PNGs are 0.001)
 //!   give the depth, or an `.exr` file (single- or multi-part) whose channel `Z` or ending in `.Z`
@@ -108,7 +111,9 @@ mod error;
 mod io;
 pub mod lens;
 mod load;
+pub mod nerfstudio;
 mod pixels;
+pub mod placement;
 mod rendered;
 mod resize;
 pub mod scenes;
@@ -149,6 +154,8 @@ pub struct Dataset {
     frames: Vec<FramePixels>,
     depth_kind: DepthKind,
     source: Option<SceneSource>,
+    /// The capture's sparse points (nerfstudio's `ply_file_path`, resolved), if it names them.
+    points_file: Option<PathBuf>,
 }
 
 /// How [`Dataset::load_with`] reads a dataset.
@@ -333,6 +340,7 @@ impl Dataset {
             frames: indices.iter().map(|&i| self.frames[i].clone()).collect(),
             depth_kind: self.depth_kind,
             source: self.source,
+            points_file: self.points_file.clone(),
         })
     }
 

@@ -188,7 +188,20 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         frames: pixels,
         depth_kind: kind,
         source,
+        points_file: points_file(&root, base, &path)?,
     })
+}
+
+/// nerfstudio's `ply_file_path` (the capture's sparse points), relative to the dataset.
+fn points_file(root: &Value, base: &Path, path: &Path) -> Result<Option<PathBuf>> {
+    match root.get("ply_file_path") {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(name)) => Ok(Some(base.join(name))),
+        Some(other) => Err(file_error(
+            path,
+            format!("`ply_file_path` must be a file name (a PLY point cloud), got {other}"),
+        )),
+    }
 }
 
 /// The `depth_kind` of `transforms.json`; refuses a dataset without one, since reading planar
@@ -233,7 +246,7 @@ fn declared_size(root: &Value, path: &Path) -> Result<Option<(usize, usize)>> {
 
 /// Resolves an image path relative to the dataset; a name without extension that does not exist
 /// gets `.png` appended (Blender NeRF data).
-fn image_file(base: &Path, name: &str) -> PathBuf {
+pub(crate) fn image_file(base: &Path, name: &str) -> PathBuf {
     let path = base.join(name);
     if path.extension().is_none() && !path.exists() {
         path.with_extension("png")
@@ -413,7 +426,7 @@ fn check_rigid(frame: &Value, at: &FrameRef<'_>) -> Result<()> {
 /// Python's `json.dump` writes `NaN`, `Infinity` and `-Infinity`, which JSON has no words for;
 /// reading them as `null` lets the checks name the frame and field instead of failing on the
 /// whole file.
-fn python_json_to_strict(text: &str) -> Cow<'_, str> {
+pub(crate) fn python_json_to_strict(text: &str) -> Cow<'_, str> {
     if !text.contains("NaN") && !text.contains("Infinity") {
         return Cow::Borrowed(text);
     }

@@ -7,11 +7,15 @@ mod common;
 
 use std::path::Path;
 
+use common::capture::{
+    assert_fills_the_cube, assert_similar_cameras, photo_and_mask, pixels, surface_points, to_f64,
+};
 use common::lens_photos;
 
-use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
-use rgbd_dataset::colmap::{import, ImportOptions, UpFrom};
+use glam::{DMat3, DQuat, DVec3};
+use rgbd_dataset::colmap::{import, ImportOptions};
 use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
+use rgbd_dataset::placement::UpFrom;
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
 
@@ -22,10 +26,6 @@ const SCALE: f64 = 2.5;
 const SHIFT: DVec3 = DVec3::new(3.0, -1.0, 2.0);
 fn turn() -> DMat3 {
     DMat3::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7)
-}
-
-fn to_f64(m: glam::Mat4) -> DMat4 {
-    DMat4::from_cols_array(&m.to_cols_array().map(f64::from))
 }
 
 /// Writes a text model of `data` (cameras moved into the capture's frame; points where the
@@ -58,26 +58,18 @@ fn write_model(data: &Dataset, dir: &Path, camera: &str) -> Vec<DVec3> {
         );
     }
     std::fs::write(dir.join("images.txt"), images).unwrap();
-    let level = data.level(SIZE, SIZE, &candle_core::Device::Cpu).unwrap();
-    let depths: Vec<f32> = level.depths.flatten_all().unwrap().to_vec1().unwrap();
-    let alphas: Vec<f32> = level.opacity.flatten_all().unwrap().to_vec1().unwrap();
     let mut points = String::new();
     let mut placed = Vec::new();
-    let mut id = 0;
-    for (v, cam) in data.cameras().iter().enumerate() {
-        for pixel in (0..SIZE * SIZE).step_by(7) {
-            let at = v * SIZE * SIZE + pixel;
-            if alphas[at] < 0.99 {
-                continue;
-            }
-            let (row, col) = ((pixel / SIZE) as f32 + 0.5, (pixel % SIZE) as f32 + 0.5);
-            let (origin, dir) = cam.ray(row, col);
-            let p: Vec3 = origin + dir * depths[at];
-            let p = SCALE * (turn() * p.as_dvec3()) + SHIFT;
-            placed.push(p);
-            id += 1;
-            points += &format!("{id} {} {} {} 128 128 128 0.5 1 0 2 0\n", p.x, p.y, p.z);
-        }
+    for (id, p) in surface_points(data, SIZE, 7).into_iter().enumerate() {
+        let p = SCALE * (turn() * p) + SHIFT;
+        placed.push(p);
+        points += &format!(
+            "{} {} {} {} 128 128 128 0.5 1 0 2 0\n",
+            id + 1,
+            p.x,
+            p.y,
+            p.z
+        );
     }
     std::fs::write(dir.join("points3D.txt"), points).unwrap();
     placed
@@ -120,17 +112,11 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
     assert_eq!(imported.depth_kind(), DepthKind::None);
 
     let (a, b) = (data.cameras(), imported.cameras());
-    // One rotation takes every original camera to its imported one, and it keeps +z up within
-    // a few degrees (the cameras' mean up is the scene's up).
-    let map = |i: usize| {
-        DMat3::from_mat4(to_f64(b[i].c2w)) * DMat3::from_mat4(to_f64(a[i].c2w)).transpose()
-    };
-    for i in 1..a.len() {
-        let diff = map(i) * map(0).transpose();
-        let angle = DQuat::from_mat3(&diff).angle_between(DQuat::IDENTITY);
-        assert!(angle < 1e-4, "camera {i}: rotations differ by {angle} rad");
-    }
-    let up = map(0) * DVec3::Z;
+    // One rotation takes every original camera to its imported one, distances between camera
+    // centres scale by one factor (the capture's times the import's), and +z stays up.
+    let factor = SCALE * summary.placement.scale;
+    let turned = assert_similar_cameras(a, b, factor, 1e-4);
+    let up = turned * DVec3::Z;
     // Up from the ground plane the surface points find (the scene's flat ground): within 2
     // degrees; from the cameras' mean up (six cameras, not spread evenly), within 15.
     assert_eq!(summary.placement.up, UpFrom::Ground);
@@ -141,48 +127,17 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
     };
     let cameras_summary = import(&model, &by_cameras, &tmp.path().join("by_cameras")).unwrap();
     assert_eq!(cameras_summary.placement.up, UpFrom::Cameras);
-    let cameras_up = cameras_summary.placement.rotation.transpose() * DVec3::Z;
-    let truth_up = summary.placement.rotation.transpose() * DVec3::Z;
+    let cameras_up = cameras_summary.placement.up_in_capture();
+    let truth_up = summary.placement.up_in_capture();
     assert!(cameras_up.angle_between(truth_up).to_degrees() < 15.0);
-    // Distances between camera centres scale by one factor: the capture's times the import's.
-    let centre = |c: &volrender::Camera| c.position().as_dvec3();
-    let factor = SCALE * summary.placement.scale;
-    for i in 0..a.len() {
-        for j in 0..i {
-            let (da, db) = (centre(&a[i]) - centre(&a[j]), centre(&b[i]) - centre(&b[j]));
-            assert!((db.length() / da.length() - factor).abs() < 1e-4 * factor);
-        }
-    }
     // The intrinsics and the photos come back as they were.
     for (ca, cb) in a.iter().zip(b) {
         assert!((ca.fx - cb.fx).abs() < 1e-3 && (ca.cx - cb.cx).abs() < 1e-4);
     }
-    let pixels = |d: &Dataset| -> Vec<f32> {
-        let level = d.level(SIZE, SIZE, &candle_core::Device::Cpu).unwrap();
-        let mut v: Vec<f32> = level.images.flatten_all().unwrap().to_vec1().unwrap();
-        v.extend(
-            level
-                .opacity
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap(),
-        );
-        v
-    };
-    assert_eq!(pixels(&data), pixels(&imported));
-    // Every surface point lands in the cube, the scene's middle near the origin, and the scene
-    // fills it: its widest side spans more than half the cube.
+    assert_eq!(pixels(&data, SIZE), pixels(&imported, SIZE));
+    // Every surface point lands in the cube, the scene fills it, its middle near the origin.
+    assert_fills_the_cube(&summary.placement, &points);
     let m = summary.placement.matrix();
-    let placed: Vec<DVec3> = points.iter().map(|&p| m.transform_point3(p)).collect();
-    assert!(
-        placed.iter().all(|p| p.abs().max_element() <= 1.0),
-        "a point outside the cube"
-    );
-    let (low, high) = placed
-        .iter()
-        .fold((DVec3::MAX, DVec3::MIN), |(l, h), &p| (l.min(p), h.max(p)));
-    assert!((high - low).max_element() > 1.0, "{low} {high}");
     let placed_centre = m.transform_point3(SHIFT);
     assert!(placed_centre.length() < 0.5, "{placed_centre}");
 }
@@ -200,10 +155,7 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
         let rgba = image::open(tmp.path().join("data").join(name))
             .unwrap()
             .to_rgba8();
-        let rgb = image::DynamicImage::ImageRgba8(rgba.clone()).to_rgb8();
-        let mask = image::GrayImage::from_fn(rgba.width(), rgba.height(), |x, y| {
-            image::Luma([rgba.get_pixel(x, y)[3]])
-        });
+        let (rgb, mask) = photo_and_mask(&rgba);
         for (dir, save) in [(&photos, 0), (&masks, 1)] {
             let file = dir.join(name);
             std::fs::create_dir_all(file.parent().unwrap()).unwrap();

@@ -7,6 +7,7 @@ mod common;
 
 use std::path::Path;
 
+use common::capture::photo_and_mask;
 use common::lens_photos;
 use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
 use rgbd_dataset::scenes::StandingStones;
@@ -33,14 +34,7 @@ fn write_capture(data: &Dataset, data_dir: &Path, dir: &Path, axes: &str) -> Val
         let pinhole = image::open(data_dir.join(name)).unwrap().to_rgba8();
         let photo = photo_through_lens(&pinhole, k, lens());
         // A camera's photo has a background (grey here) and no alpha; the mask has the alpha.
-        let rgb = image::RgbImage::from_fn(photo.width(), photo.height(), |x, y| {
-            let p = photo.get_pixel(x, y);
-            let a = f32::from(p[3]) / 255.0;
-            image::Rgb([0, 1, 2].map(|c| (f32::from(p[c]) * a + 128.0 * (1.0 - a)).round() as u8))
-        });
-        let mask = image::GrayImage::from_fn(photo.width(), photo.height(), |x, y| {
-            image::Luma([photo.get_pixel(x, y)[3]])
-        });
+        let (rgb, mask) = photo_and_mask(&photo);
         let (file, mask_file) = (
             format!("images/frame_{:05}.jpg", i + 1),
             format!("masks/mask_{:05}.png", i + 1),

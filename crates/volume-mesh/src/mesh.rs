@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 
-use glam::DVec3;
+use glam::{DMat3, DMat4, DVec3};
 
 /// An indexed triangle mesh with a normal and a colour per vertex, in world coordinates.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -19,6 +19,59 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// The mesh in another frame: positions mapped by the affine `map` (e.g. the similarity
+    /// that takes a dataset's frame back to its capture's), normals by its inverse transpose
+    /// (renormalised), and the triangles' winding reversed when `map` mirrors, so that they stay
+    /// counter-clockwise seen from outside. `None` when `map` is singular or not finite.
+    ///
+    /// ```
+    /// use glam::{DMat4, DVec3};
+    /// let triangle = volume_mesh::Mesh {
+    ///     positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+    ///     normals: vec![[0.0, 0.0, 1.0]; 3],
+    ///     colours: vec![[1.0; 3]; 3],
+    ///     triangles: vec![[0, 1, 2]],
+    /// };
+    /// let map = DMat4::from_scale_rotation_translation(
+    ///     DVec3::splat(2.0),
+    ///     glam::DQuat::from_rotation_x(std::f64::consts::FRAC_PI_2),
+    ///     DVec3::new(0.0, 0.0, 5.0),
+    /// );
+    /// let moved = triangle.transformed(map).unwrap();
+    /// assert!((moved.area() - 4.0 * triangle.area()).abs() < 1e-9);
+    /// // The +z normal turned a quarter about x points along -y.
+    /// assert!((DVec3::from(moved.normals[0].map(f64::from)) - DVec3::NEG_Y).length() < 1e-6);
+    /// assert!((moved.positions[2][2] - 7.0).abs() < 1e-6);
+    /// ```
+    pub fn transformed(&self, map: DMat4) -> Option<Mesh> {
+        let linear = DMat3::from_mat4(map);
+        let det = linear.determinant();
+        if !map.is_finite() || det.abs() < 1e-12 {
+            return None;
+        }
+        let normal_map = linear.inverse().transpose();
+        let f32s = |v: DVec3| v.to_array().map(|c| c as f32);
+        let as_f64 = |p: &[f32; 3]| DVec3::from(p.map(f64::from));
+        Some(Mesh {
+            positions: self
+                .positions
+                .iter()
+                .map(|p| f32s(map.transform_point3(as_f64(p))))
+                .collect(),
+            normals: self
+                .normals
+                .iter()
+                .map(|n| f32s((normal_map * as_f64(n)).normalize_or_zero()))
+                .collect(),
+            colours: self.colours.clone(),
+            triangles: if det > 0.0 {
+                self.triangles.clone()
+            } else {
+                self.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect()
+            },
+        })
+    }
+
     /// The number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
@@ -96,5 +149,53 @@ impl Mesh {
             let p = self.positions[i as usize];
             DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A tetrahedron wound counter-clockwise seen from outside.
+    fn tetrahedron() -> Mesh {
+        Mesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            normals: vec![
+                [-1.0, -1.0, -1.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            colours: vec![[0.5; 3]; 4],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn a_transformed_mesh_keeps_its_inside_inside() {
+        let mesh = tetrahedron();
+        assert!((mesh.enclosed_volume() - 1.0 / 6.0).abs() < 1e-9);
+        // Doubled and turned: eight times the volume, still positive (outward winding).
+        let similar = DMat4::from_scale_rotation_translation(
+            DVec3::splat(2.0),
+            glam::DQuat::from_rotation_y(1.0),
+            DVec3::new(3.0, -1.0, 2.0),
+        );
+        let moved = mesh.transformed(similar).unwrap();
+        assert!((moved.enclosed_volume() - 8.0 / 6.0).abs() < 1e-5);
+        // Mirrored: the winding is reversed with it, and the normals still point out.
+        let mirrored = mesh
+            .transformed(DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)))
+            .unwrap();
+        assert!((mirrored.enclosed_volume() - 1.0 / 6.0).abs() < 1e-9);
+        assert_eq!(mirrored.normals[1], [-1.0, 0.0, 0.0]);
+        assert!(mirrored.is_closed());
+        // Singular or non-finite maps are refused.
+        assert!(mesh
+            .transformed(DMat4::from_scale(DVec3::new(1.0, 0.0, 1.0)))
+            .is_none());
+        assert!(mesh
+            .transformed(DMat4::from_scale(DVec3::splat(f64::NAN)))
+            .is_none());
     }
 }

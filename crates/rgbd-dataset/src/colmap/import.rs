@@ -1,5 +1,5 @@
 //! A COLMAP reconstruction and its photos as a dataset volgen trains on: the capture turned
-//! upright, centred and scaled into the model's cube ([`Placement`]), each photo written as
+//! upright, centred and scaled into the model's cube ([`crate::placement::Placement`]), each photo written as
 //! RGBA (its own alpha, or a mask image as alpha), and a `transforms.json` with per-frame
 //! intrinsics, `depth_kind` "none" and the placement recorded.
 
@@ -7,240 +7,13 @@ use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
 
-use glam::{DMat3, DMat4, DVec3};
 use serde_json::json;
 
-use super::up::{rotation_between, up_direction, UpFrom};
 use super::{model_error, CameraModel, ColmapCamera, ColmapModel};
 use crate::error::{invalid, io_error, Error, Result};
 use crate::io::{create_dir, write_bytes};
 use crate::lens::Undistortion;
-
-/// Where the capture's points go: all but the outermost 1% on each side per axis (between
-/// these percentiles) fill this much of the model's half side, as `--bounds auto` places a scene
-/// from its depth maps (1st to 99th percentile, 5% margin each side): stray points far out do
-/// not shrink the scene, and its edges stay inside the cube. (The 5th to 95th percentiles filling
-/// 0.9 cut off the ground of a Blender scene: a fit of its views reached 18.4 dB.)
-const POINT_PERCENTILES: (f64, f64) = (0.01, 0.99);
-const FILLED_HALF_SIDE: f64 = 1.0 / 1.1;
-
-/// The similarity from a capture's frame to the dataset's: `p' = scale * rotation * (p -
-/// centre)`. The rotation turns the up direction to +z (the ground plane's normal or the
-/// cameras' mean up, [`up_direction`]); the centre and scale put the middle of the scene's box at the
-/// origin and its largest half side at 1 / 1.1 of the cube's, as `--bounds auto` places a scene
-/// from its depth maps. The scene's box is the box of the foreground's visual hull when the
-/// photos' foreground is known ([`Placement::of_foreground`]) across, the sparse points'
-/// central 98% up and down.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Placement {
-    pub rotation: DMat3,
-    pub centre: DVec3,
-    pub scale: f64,
-    /// Where the up direction the rotation turns to +z came from ([`up_direction`]).
-    pub up: UpFrom,
-}
-
-impl Placement {
-    /// The placement with the box of the foreground's visual hull: the points of space that
-    /// every photo seeing them shows as foreground (`foreground[i]`, one per registered image,
-    /// in order). Sparse points
-    /// miss the parts of a scene where few features are found (a plain ground's far edges, seen
-    /// obliquely); the masks do not. The hull bounds the scene across (x and y after turning it
-    /// upright), searched on a grid over twice the points' box across and between their lowest
-    /// and highest up and down, among the grid points at least half the photos frame; up and
-    /// down the points' box bounds it (photos from around and above carve neither under the
-    /// ground nor far above it).
-    pub fn of_foreground(
-        model: &ColmapModel,
-        foreground: &[Foreground],
-        up: UpFrom,
-    ) -> Result<Self> {
-        let (rotation, up) = upright(model, up)?;
-        let (low, high) = points_box(model, rotation);
-        // Across, the hull; up and down, the points: photos from around and above carve the
-        // sides well, but not below the ground (which hides it: the hull there spreads wider
-        // than the ground) nor far above it. So the hull is searched over twice the points' box
-        // across, between their lowest and highest up and down.
-        let (centre, half) = (0.5 * (low + high), (high - low).max(DVec3::splat(1e-9)));
-        let search = (
-            DVec3::new(centre.x - half.x, centre.y - half.y, low.z),
-            DVec3::new(centre.x + half.x, centre.y + half.y, high.z),
-        );
-        let Some((hull_low, hull_high)) = hull_box(model, foreground, rotation, search) else {
-            return Self::around((rotation, up), (low, high));
-        };
-        let low = DVec3::new(hull_low.x, hull_low.y, low.z);
-        let high = DVec3::new(hull_high.x, hull_high.y, high.z);
-        Self::around((rotation, up), (low, high))
-    }
-
-    /// Centres and scales the box `(low, high)` of the turned frame.
-    fn around((rotation, up): (DMat3, UpFrom), (low, high): (DVec3, DVec3)) -> Result<Self> {
-        let half = 0.5 * (high - low);
-        if half.max_element() <= 0.0 {
-            return Err(invalid(
-                "COLMAP model",
-                "the scene's box has no extent: too few or identical points",
-            ));
-        }
-        Ok(Self {
-            rotation,
-            centre: rotation.transpose() * (0.5 * (low + high)),
-            scale: FILLED_HALF_SIDE / half.max_element(),
-            up,
-        })
-    }
-
-    /// The placement as a 4x4 matrix acting on points.
-    pub fn matrix(&self) -> DMat4 {
-        DMat4::from_scale(DVec3::splat(self.scale))
-            * DMat4::from_mat3(self.rotation)
-            * DMat4::from_translation(-self.centre)
-    }
-
-    /// A camera-to-world matrix (rigid) of the capture as one of the dataset: rotated, its
-    /// centre placed; still rigid (the scale moves centres only).
-    pub fn place_camera(&self, c2w: DMat4) -> DMat4 {
-        let rotation = self.rotation * DMat3::from_mat4(c2w);
-        let centre = self.matrix().transform_point3(c2w.w_axis.truncate());
-        let mut placed = DMat4::from_mat3(rotation);
-        placed.w_axis = centre.extend(1.0);
-        placed
-    }
-}
-
-/// The rotation turning the up direction `up` asks for to +z, and where up came from; errors
-/// without images or points.
-fn upright(model: &ColmapModel, up: UpFrom) -> Result<(DMat3, UpFrom)> {
-    if model.images.is_empty() || model.points.is_empty() {
-        return Err(invalid(
-            "COLMAP model",
-            format!(
-                "needs registered images and 3D points to place the scene, has {} images and {} \
-                 points",
-                model.images.len(),
-                model.points.len()
-            ),
-        ));
-    }
-    Ok(match up_direction(model, up) {
-        Some((direction, used)) => (rotation_between(direction, DVec3::Z), used),
-        None => (DMat3::IDENTITY, UpFrom::Cameras),
-    })
-}
-
-/// The box of the points turned by `rotation`, between the [`POINT_PERCENTILES`].
-fn points_box(model: &ColmapModel, rotation: DMat3) -> (DVec3, DVec3) {
-    let turned: Vec<DVec3> = model
-        .points
-        .iter()
-        .map(|p| rotation * DVec3::from(p.position))
-        .collect();
-    central_box(&turned)
-}
-
-/// Cells per axis of the grid the visual hull is searched on.
-const HULL_GRID: usize = 64;
-
-/// The box (in the turned frame) of the grid points of `search` that every photo framing them
-/// shows as foreground, and that at least half the photos (and two) frame; `None` when no point
-/// is kept.
-fn hull_box(
-    model: &ColmapModel,
-    foreground: &[Foreground],
-    rotation: DMat3,
-    (low, high): (DVec3, DVec3),
-) -> Option<(DVec3, DVec3)> {
-    let views: Vec<MaskedView<'_>> = model
-        .images
-        .iter()
-        .zip(foreground)
-        .map(|(image, photo)| {
-            let camera = &model.cameras[&image.camera_id];
-            MaskedView {
-                rotation: image.world_to_camera_rotation(),
-                translation: DVec3::from(image.translation),
-                intrinsics: photo.intrinsics,
-                size: (camera.width as usize, camera.height as usize),
-                alpha: &photo.alpha,
-            }
-        })
-        .collect();
-    // A point of the scene is in most photos' frame; points that few photos frame are not
-    // carved by the others and would otherwise stay.
-    let min_framed = (views.len() / 2).max(2);
-    let step = (high - low) / HULL_GRID as f64;
-    let mut kept: Option<(DVec3, DVec3)> = None;
-    for k in 0..HULL_GRID {
-        for j in 0..HULL_GRID {
-            for i in 0..HULL_GRID {
-                let turned =
-                    low + step * DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
-                let world = rotation.transpose() * turned;
-                let mut framed = 0;
-                let inside = views.iter().all(|view| match view.shows(world) {
-                    None => true,
-                    Some(foreground) => {
-                        framed += 1;
-                        foreground
-                    }
-                });
-                if inside && framed >= min_framed {
-                    let (lo, hi) = kept.get_or_insert((turned, turned));
-                    *lo = lo.min(turned - 0.5 * step);
-                    *hi = hi.max(turned + 0.5 * step);
-                }
-            }
-        }
-    }
-    kept
-}
-
-/// A registered photo's foreground, as [`Placement::of_foreground`] reads it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Foreground {
-    /// `fx, fy, cx, cy` of the photo's pinhole camera (after undistortion), in pixels.
-    pub intrinsics: [f64; 4],
-    /// Opacity bytes, row-major at the camera's size; above half is foreground.
-    pub alpha: Vec<u8>,
-}
-
-/// A registered photo as the visual hull sees it: its pose, pinhole intrinsics and foreground.
-struct MaskedView<'a> {
-    rotation: DMat3,
-    translation: DVec3,
-    intrinsics: [f64; 4],
-    size: (usize, usize),
-    /// Opacity bytes, row-major.
-    alpha: &'a [u8],
-}
-
-impl MaskedView<'_> {
-    /// Whether the photo shows the world point as foreground (opacity above half), or `None`
-    /// when the point is behind the camera or outside the frame.
-    fn shows(&self, world: DVec3) -> Option<bool> {
-        let c = self.rotation * world + self.translation;
-        let [fx, fy, cx, cy] = self.intrinsics;
-        let (w, h) = self.size;
-        let (u, v) = (fx * c.x / c.z + cx, fy * c.y / c.z + cy);
-        let framed = c.z > 0.0 && u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64;
-        framed.then(|| self.alpha[v as usize * w + u as usize] > u8::MAX / 2)
-    }
-}
-
-/// Per axis the [`POINT_PERCENTILES`] of `points`.
-pub(super) fn central_box(points: &[DVec3]) -> (DVec3, DVec3) {
-    let mut low = DVec3::ZERO;
-    let mut high = DVec3::ZERO;
-    for axis in 0..3 {
-        let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
-        values.sort_by(f64::total_cmp);
-        let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
-        low[axis] = at(POINT_PERCENTILES.0);
-        high[axis] = at(POINT_PERCENTILES.1);
-    }
-    (low, high)
-}
+use crate::placement::{Foreground, Placement, SparseCapture, UpFrom};
 
 /// Where a capture's pictures are.
 #[derive(Debug, Clone)]
@@ -251,7 +24,7 @@ pub struct ImportOptions {
     /// when the name has another extension), white on the scene, black elsewhere; `None`: the
     /// photos' own alpha channel.
     pub masks: Option<PathBuf>,
-    /// Which way is up ([`up_direction`]): the ground plane's normal where credible (the
+    /// Which way is up ([`crate::placement::up_direction`]): the ground plane's normal where credible (the
     /// default), or the cameras' mean up.
     pub up: UpFrom,
 }
@@ -336,10 +109,11 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
         .zip(&intrinsics)
         .map(|(photo, &intrinsics)| Foreground {
             intrinsics,
+            size: (size.0 as usize, size.1 as usize),
             alpha: photo.pixels().map(|p| p[3]).collect(),
         })
         .collect();
-    let placement = Placement::of_foreground(&model, &foreground, options.up)?;
+    let placement = Placement::of_foreground(&(&model).into(), &foreground, options.up)?;
     create_dir(&out.join("images"))?;
     let transforms_path = out.join("transforms.json");
     radiance_volume::io::remove_file_if_exists(&transforms_path)?;
@@ -405,6 +179,16 @@ pub fn import(model_dir: &Path, options: &ImportOptions, out: &Path) -> Result<I
             })
             .collect(),
     })
+}
+
+impl From<&ColmapModel> for SparseCapture {
+    /// The model's registered cameras (in file order) and points, as placing it reads them.
+    fn from(model: &ColmapModel) -> Self {
+        Self {
+            cameras: model.images.iter().map(|i| i.camera_to_world()).collect(),
+            points: model.points.iter().map(|p| p.position.into()).collect(),
+        }
+    }
 }
 
 /// The one image size every camera of the model has (a dataset's images share one size).

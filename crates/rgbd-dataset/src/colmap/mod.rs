@@ -28,10 +28,8 @@
 mod binary;
 mod import;
 mod text;
-mod up;
 
-pub use import::{import, Foreground, ImportOptions, ImportSummary, Placement, UndistortedCamera};
-pub use up::{cameras_up, ground_plane, up_direction, UpFrom};
+pub use import::{import, ImportOptions, ImportSummary, UndistortedCamera};
 
 use std::collections::BTreeMap;
 use std::fmt;

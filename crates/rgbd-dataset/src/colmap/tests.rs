@@ -4,6 +4,7 @@ use glam::{DMat3, DMat4, DQuat, DVec3};
 
 use super::binary::write;
 use super::*;
+use crate::placement::{cameras_up, ground_plane, up_direction, SparseCapture, UpFrom};
 
 /// A model with two cameras, three images (one name with a space) and three points, in both
 /// encodings.
@@ -361,6 +362,7 @@ fn ground_model(ground: bool) -> (ColmapModel, DVec3) {
 #[test]
 fn up_comes_from_the_ground_plane_where_there_is_one() {
     let (model, normal) = ground_model(true);
+    let model = SparseCapture::from(&model);
     let (found, share) = ground_plane(&model).unwrap();
     assert!(found.angle_between(normal).to_degrees() < 0.01, "{found}");
     assert!((share - 400.0 / 440.0).abs() < 0.01, "{share}");
@@ -379,6 +381,7 @@ fn up_comes_from_the_ground_plane_where_there_is_one() {
     );
     // Points on a sphere hold no plane worth the name: the cameras' up is used.
     let (floating, _) = ground_model(false);
+    let floating = SparseCapture::from(&floating);
     let (up, from) = up_direction(&floating, UpFrom::Ground).unwrap();
     assert_eq!(from, UpFrom::Cameras);
     assert!(up.angle_between(normal).to_degrees() < 1e-6);

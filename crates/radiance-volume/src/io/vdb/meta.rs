@@ -2,7 +2,7 @@
 //! descriptors and the index -> world transform (OpenVDB `io/Archive.cc`, `io/GridDescriptor.cc`,
 //! `math/Maps.h`).
 
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 
 use super::bytes::PutBytes;
 use crate::grid::VoxelGrid;
@@ -114,11 +114,14 @@ pub(crate) fn content_uuid<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> Str
 }
 
 /// The linear index -> world map of an exported grid: `world = index * voxel_size + translation`,
-/// with voxel centres at integer indices.
+/// with voxel centres at integer indices, then `placed` when the volume's coordinates are mapped
+/// on to another frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Transform {
     pub(crate) voxel_size: DVec3,
     pub(crate) translation: DVec3,
+    /// An affine map from the volume's coordinates to the file's world, if any.
+    pub(crate) placed: Option<DMat4>,
 }
 
 impl Transform {
@@ -132,25 +135,44 @@ impl Transform {
         Self {
             voxel_size,
             translation: min + 0.5 * voxel_size,
+            placed: None,
         }
     }
 
-    /// Returns the OpenVDB map type: uniform when the three voxel sizes are exactly equal.
+    /// Returns the OpenVDB map type: an affine map when placed, else uniform when the three
+    /// voxel sizes are exactly equal.
     pub(crate) fn map_type(&self) -> &'static str {
         let s = self.voxel_size;
-        if s.x == s.y && s.y == s.z {
+        if self.placed.is_some() {
+            "AffineMap"
+        } else if s.x == s.y && s.y == s.z {
             "UniformScaleTranslateMap"
         } else {
             "ScaleTranslateMap"
         }
     }
 
-    /// Appends the transform as `ScaleTranslateMap::write` does: the map type name, then the
-    /// translation and the five cached vectors of the scale map (scale, voxel size, 1/scale,
-    /// 1/scale^2, 1/(2 scale)).
+    /// The whole index -> world map as a matrix acting on column vectors.
+    pub(crate) fn matrix(&self) -> DMat4 {
+        let grid = DMat4::from_translation(self.translation) * DMat4::from_scale(self.voxel_size);
+        self.placed.map_or(grid, |placed| placed * grid)
+    }
+
+    /// Appends the transform as OpenVDB's maps write themselves: the map type name, then for
+    /// `AffineMap::write` its 4x4 matrix (row-major, for row vectors: the transpose of
+    /// [`Transform::matrix`], so translation is the last row), for `ScaleTranslateMap::write`
+    /// the translation and the five cached vectors of the scale map (scale, voxel size,
+    /// 1/scale, 1/scale^2, 1/(2 scale)).
     pub(crate) fn put(&self, buf: &mut Vec<u8>) {
-        let s = self.voxel_size;
         buf.put_str(self.map_type());
+        if self.placed.is_some() {
+            // Column-major for column vectors is row-major for row vectors.
+            for c in self.matrix().to_cols_array() {
+                buf.put_f64(c);
+            }
+            return;
+        }
+        let s = self.voxel_size;
         for v in [
             self.translation,
             s,
@@ -193,5 +215,35 @@ mod tests {
         let mut buf = Vec::new();
         Transform::for_grid(&g).put(&mut buf);
         assert_eq!(buf.len(), 4 + "ScaleTranslateMap".len() + 18 * 8);
+    }
+
+    #[test]
+    fn a_placed_transform_is_an_affine_map_of_row_vectors() {
+        let g = VoxelGrid::new(Aabb::CUBE, GridDims::cube(4)).unwrap();
+        let placed = DMat4::from_scale_rotation_translation(
+            DVec3::splat(2.0),
+            glam::DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2),
+            DVec3::new(10.0, 0.0, 0.0),
+        );
+        let t = Transform {
+            placed: Some(placed),
+            ..Transform::for_grid(&g)
+        };
+        assert_eq!(t.map_type(), "AffineMap");
+        let mut buf = Vec::new();
+        t.put(&mut buf);
+        let name = 4 + "AffineMap".len();
+        assert_eq!(buf.len(), name + 16 * 8);
+        // Rounded to 1e-12 (the quarter turn's cosine is not exactly 0).
+        let m: Vec<f64> = buf[name..]
+            .chunks(8)
+            .map(|b| (f64::from_le_bytes(b.try_into().unwrap()) * 1e12).round() / 1e12)
+            .collect();
+        // Index (0, 0, 0) is the first voxel's centre (-0.75, -0.75, -0.75), turned a quarter
+        // about z, doubled and moved: (10 + 1.5, -1.5, -1.5). As a row vector [0 0 0 1] times
+        // the matrix, that is its last row.
+        assert_eq!(&m[12..16], &[11.5, -1.5, -1.5, 1.0]);
+        // Index x + 1 moves a voxel (0.5) along x, which lands along +y, doubled: the first row.
+        assert_eq!(&m[0..4], &[0.0, 1.0, 0.0, 0.0]);
     }
 }

@@ -38,6 +38,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use candle_core::Tensor;
+use glam::DMat4;
 
 use self::bytes::PutBytes;
 use self::meta::{MetaValue, Transform, COMPRESS_ACTIVE_MASK, COMPRESS_ZIP};
@@ -76,6 +77,7 @@ pub struct VdbWriter<'a> {
     threshold: f32,
     feature_grids: bool,
     replace_non_finite: Option<f32>,
+    placed: Option<DMat4>,
 }
 
 impl RadianceVolume {
@@ -89,6 +91,7 @@ impl RadianceVolume {
             threshold: 0.0,
             feature_grids: false,
             replace_non_finite: None,
+            placed: None,
         }
     }
 }
@@ -129,6 +132,30 @@ impl<'a> VdbWriter<'a> {
         }
     }
 
+    /// Places the grid in another frame: the file's world is the volume's coordinates mapped by
+    /// the affine `placed` (OpenVDB's `AffineMap`), e.g. the similarity back to a capture's
+    /// frame. Density is written as it is: scale it by the inverse of a similarity's length
+    /// factor first (per unit length, opacity must stay the same along longer rays).
+    /// [`RadianceVolume::read_vdb`] (through vdb-rs) does not read such files; OpenVDB and
+    /// Blender do. Errors at writing when `placed` is not finite, its last row is not
+    /// `[0, 0, 0, 1]` or it is singular.
+    ///
+    /// ```
+    /// use radiance_volume::{Aabb, GridDims, RadianceVolume};
+    /// let v = RadianceVolume::from_fn(GridDims::cube(8), Aabb::CUBE, 4, |_, out| out[0] = 1.0)?;
+    /// let turn = glam::DMat4::from_rotation_z(0.5);
+    /// let mut file = Vec::new();
+    /// v.write_vdb().placed(turn).to_writer(&mut file)?;
+    /// assert!(file.windows(9).any(|w| w == b"AffineMap"));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn placed(self, placed: DMat4) -> Self {
+        Self {
+            placed: Some(placed),
+            ..self
+        }
+    }
+
     /// Writes the file atomically. The destination is checked first, so an unwritable path fails
     /// before any work, and no partial file is ever left under `path`.
     pub fn to_file(&self, path: impl AsRef<Path>) -> Result<VdbStats> {
@@ -156,6 +183,18 @@ impl<'a> VdbWriter<'a> {
                 "threshold",
                 format!("must be finite, got {}", self.threshold),
             ));
+        }
+        if let Some(m) = self.placed {
+            let affine = m.row(3) == glam::DVec4::W;
+            if !m.is_finite() || !affine || m.determinant().abs() < 1e-12 {
+                return Err(invalid(
+                    "placed",
+                    format!(
+                        "expected a finite, invertible affine map (last row [0, 0, 0, 1]), got \
+                         {m:?}"
+                    ),
+                ));
+            }
         }
         if let Some(r) = self.replace_non_finite.filter(|r| !r.is_finite()) {
             return Err(invalid(
@@ -187,7 +226,10 @@ impl<'a> VdbWriter<'a> {
             half: self.half,
             zlib: self.zlib,
         };
-        let transform = Transform::for_grid(volume.grid());
+        let transform = Transform {
+            placed: self.placed,
+            ..Transform::for_grid(volume.grid())
+        };
         volume.with_values(|values| {
             let plane = |c: usize| &values[c * dims.voxel_count()..(c + 1) * dims.voxel_count()];
             let grid = |name: &'a str, channels: std::ops::Range<usize>| GridValues {

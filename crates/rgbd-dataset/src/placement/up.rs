@@ -10,7 +10,7 @@
 use glam::{DMat3, DVec3};
 use rand::{Rng, SeedableRng};
 
-use super::ColmapModel;
+use super::SparseCapture;
 
 /// How up was decided.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -59,26 +59,26 @@ const MAX_TILT_FROM_CAMERAS_DEG: f64 = 30.0;
 
 /// The cameras' mean up direction (unit; their y axes in the NeRF convention), `None` when
 /// they cancel out or there are no cameras.
-pub fn cameras_up(model: &ColmapModel) -> Option<DVec3> {
-    let up = model
-        .images
+pub fn cameras_up(capture: &SparseCapture) -> Option<DVec3> {
+    let up = capture
+        .cameras
         .iter()
-        .map(|image| image.camera_to_world().y_axis.truncate())
+        .map(|c2w| c2w.y_axis.truncate())
         .sum::<DVec3>()
         .normalize_or_zero();
     (up != DVec3::ZERO).then_some(up)
 }
 
 /// The dominant plane of the sparse points: its unit normal, turned towards the cameras'
-/// mean centre, and the share of points on it. Found by RANSAC (seeded, so the same model
+/// mean centre, and the share of points on it. Found by RANSAC (seeded, so the same capture
 /// gives the same plane) within [`PLANE_TOLERANCE`], then refitted by least squares to its
 /// points. `None` with fewer than three points or no plane.
-pub fn ground_plane(model: &ColmapModel) -> Option<(DVec3, f64)> {
-    let points: Vec<DVec3> = model.points.iter().map(|p| p.position.into()).collect();
-    if points.len() < 3 || model.images.is_empty() {
+pub fn ground_plane(capture: &SparseCapture) -> Option<(DVec3, f64)> {
+    let points = &capture.points;
+    if points.len() < 3 || capture.cameras.is_empty() {
         return None;
     }
-    let (low, high) = super::import::central_box(&points);
+    let (low, high) = super::central_box(points);
     let tolerance = PLANE_TOLERANCE * (high - low).length();
     let on_plane =
         |normal: DVec3, at: DVec3| move |p: &&DVec3| (**p - at).dot(normal).abs() <= tolerance;
@@ -103,8 +103,12 @@ pub fn ground_plane(model: &ColmapModel) -> Option<(DVec3, f64)> {
         .collect();
     let mean = inliers.iter().sum::<DVec3>() / inliers.len() as f64;
     let mut refined = least_squares_normal(&inliers, mean).unwrap_or(normal);
-    let cameras =
-        model.images.iter().map(|i| i.centre()).sum::<DVec3>() / model.images.len() as f64;
+    let cameras = capture
+        .cameras
+        .iter()
+        .map(|c2w| c2w.w_axis.truncate())
+        .sum::<DVec3>()
+        / capture.cameras.len() as f64;
     if refined.dot(cameras - mean) < 0.0 {
         refined = -refined;
     }
@@ -134,10 +138,10 @@ fn least_squares_normal(points: &[DVec3], mean: DVec3) -> Option<DVec3> {
 /// The up direction `from` asks for, and what was used: the ground plane's normal when it is
 /// credible (at least [`MIN_GROUND_SHARE`] of the points, within [`MAX_TILT_FROM_CAMERAS_DEG`]
 /// of the cameras' up), else the cameras' up. `None` when the cameras' up is undefined.
-pub fn up_direction(model: &ColmapModel, from: UpFrom) -> Option<(DVec3, UpFrom)> {
-    let cameras = cameras_up(model)?;
+pub fn up_direction(capture: &SparseCapture, from: UpFrom) -> Option<(DVec3, UpFrom)> {
+    let cameras = cameras_up(capture)?;
     if from == UpFrom::Ground {
-        if let Some((normal, share)) = ground_plane(model) {
+        if let Some((normal, share)) = ground_plane(capture) {
             let tilt = normal.angle_between(cameras).to_degrees();
             if share >= MIN_GROUND_SHARE && tilt <= MAX_TILT_FROM_CAMERAS_DEG {
                 return Some((normal, UpFrom::Ground));
