@@ -5,7 +5,10 @@
 #   2. COLMAP 3.8 on the photos alone: feature_extractor (one PINHOLE camera), exhaustive_matcher,
 #      mapper; with LENS=opencv the photos are first warped as an OPENCV lens with distortion
 #      takes them (research example lens_photos, coefficients LENS_COEFFS) and COLMAP estimates
-#      an OPENCV camera, which the import undistorts,
+#      an OPENCV camera, which the import undistorts; LENS=ignored warps them the same and tells
+#      COLMAP the camera is a PINHOLE (the control: the lens ignored); with KNOWN_CAMERA=1 COLMAP
+#      is given the true camera (Blender's intrinsics, and the lens for OPENCV) and keeps it,
+#      as with a calibrated camera,
 #   3. volgen import colmap, then check the poses against Blender's up to a similarity
 #      (research example pose_alignment: median rotation error <= MAX_ROT degrees, median centre
 #      error <= MAX_CENTRE of the cameras' spread),
@@ -25,8 +28,8 @@
 # Needs Debian's colmap (apt-get install colmap) and bpy (../shared/validators/setup.sh).
 # Environment: PYTHON (the validators' venv), VOLGEN (cargo's release binary), VIEWS (40),
 # SIZE (192), MAX_ROT (2), MAX_CENTRE (0.03), MARGIN_DB (4), LENS (pinhole or opencv),
-# LENS_COEFFS ("-0.15 0.04 0.001 -0.0008": k1 k2 p1 p2), NERFSTUDIO (0 or 1), PEER_VENV
-# (/tmp/peer/venv).
+# LENS_COEFFS ("-0.15 0.04 0.001 -0.0008": k1 k2 p1 p2), KNOWN_CAMERA (0 or 1), NERFSTUDIO (0
+# or 1), PEER_VENV (/tmp/peer/venv).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -42,9 +45,9 @@ MARGIN_DB="${MARGIN_DB:-4}"
 LENS="${LENS:-pinhole}"
 LENS_COEFFS="${LENS_COEFFS:--0.15 0.04 0.001 -0.0008}"
 case "$LENS" in
-  pinhole) camera_model=PINHOLE ;;
+  pinhole | ignored) camera_model=PINHOLE ;;
   opencv) camera_model=OPENCV ;;
-  *) echo "LENS must be pinhole or opencv, got $LENS" >&2; exit 2 ;;
+  *) echo "LENS must be pinhole, opencv or ignored, got $LENS" >&2; exit 2 ;;
 esac
 export QT_QPA_PLATFORM=offscreen
 
@@ -58,19 +61,38 @@ echo "== scene and photos ($VIEWS views at $SIZE^2)"
   --views "$VIEWS" --size "$SIZE" --samples 16 > "$work/export.log"
 
 photos="$work/blender/images"
-if [ "$LENS" = opencv ]; then
+if [ "$LENS" != pinhole ]; then
   echo "== photos through an OPENCV lens (k1 k2 p1 p2 = $LENS_COEFFS)"
   # shellcheck disable=SC2086
   "$root/target/release/examples/lens_photos" "$work/blender" "$work/lens_photos" $LENS_COEFFS
   photos="$work/lens_photos"
 fi
 
-echo "== COLMAP ($camera_model camera)"
+known=()
+mapper_known=()
+if [ "${KNOWN_CAMERA:-0}" = "1" ]; then
+  # Blender's intrinsics (pixel centres at +0.5 in both), and the lens when COLMAP models it.
+  params=$(python3 - "$work/blender/transforms.json" <<'PY'
+import json, math, sys
+t = json.load(open(sys.argv[1]))
+w, h = t["w"], t["h"]
+fx = t.get("fl_x") or 0.5 * w / math.tan(0.5 * t["camera_angle_x"])
+fy = t.get("fl_y") or fx
+print(f"{fx},{fy},{t.get('cx', w / 2)},{t.get('cy', h / 2)}")
+PY
+)
+  if [ "$camera_model" = OPENCV ]; then params="$params,$(echo "$LENS_COEFFS" | tr ' ' ',')"; fi
+  known=(--ImageReader.camera_params "$params")
+  mapper_known=(--Mapper.ba_refine_focal_length 0 --Mapper.ba_refine_principal_point 0 --Mapper.ba_refine_extra_params 0)
+  echo "== COLMAP ($camera_model camera, known: $params)"
+else
+  echo "== COLMAP ($camera_model camera)"
+fi
 rm -rf "$work/db.db" "$work/sparse" && mkdir -p "$work/sparse"
 colmap feature_extractor --database_path "$work/db.db" --image_path "$photos" \
-  --ImageReader.single_camera 1 --ImageReader.camera_model "$camera_model" --SiftExtraction.use_gpu 0 > "$work/colmap.log" 2>&1
+  --ImageReader.single_camera 1 --ImageReader.camera_model "$camera_model" "${known[@]}" --SiftExtraction.use_gpu 0 > "$work/colmap.log" 2>&1
 colmap exhaustive_matcher --database_path "$work/db.db" --SiftMatching.use_gpu 0 >> "$work/colmap.log" 2>&1
-colmap mapper --database_path "$work/db.db" --image_path "$photos" --output_path "$work/sparse" >> "$work/colmap.log" 2>&1
+colmap mapper --database_path "$work/db.db" --image_path "$photos" --output_path "$work/sparse" "${mapper_known[@]}" >> "$work/colmap.log" 2>&1
 
 echo "== import and poses"
 "$VOLGEN" import colmap "$work/sparse/0" --images "$photos" --out "$work/imported"
