@@ -230,6 +230,13 @@ fn captures_that_cannot_be_placed_are_refused_by_name() {
         err.contains("capture_to_dataset") && err.contains("not a similarity"),
         "{err}"
     );
+    // The capture's own directory as the output: refused, the capture untouched.
+    std::fs::write(&file, root.to_string()).unwrap();
+    let err = import(&capture, &ImportOptions::default(), &capture)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("capture's own"), "{err}");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), root.to_string());
     // A capture with depth maps places itself (--bounds auto).
     let err = import(&data_dir, &ImportOptions::default(), &out)
         .unwrap_err()

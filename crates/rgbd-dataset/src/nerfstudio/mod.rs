@@ -60,12 +60,23 @@ pub struct ImportSummary {
 pub fn import(transforms: &Path, options: &ImportOptions, out: &Path) -> Result<ImportSummary> {
     let path = transforms_file(transforms);
     let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let dataset = Dataset::load_with(&path, &LoadOptions::default())?;
     let file_error = |why: String| Error::Dataset {
         path: path.clone(),
         frame: None,
         why,
     };
+    // The copy must not replace the capture's own file (or its photos with themselves).
+    let same_dir = std::fs::canonicalize(&base)
+        .ok()
+        .zip(std::fs::canonicalize(out).ok())
+        .is_some_and(|(a, b)| a == b);
+    if same_dir {
+        return Err(file_error(format!(
+            "the output directory {} is the capture's own: write the placed copy elsewhere",
+            out.display()
+        )));
+    }
+    let dataset = Dataset::load_with(&path, &LoadOptions::default())?;
     if dataset.depth_kind() != DepthKind::None {
         return Err(file_error(
             "has depth maps: train on it directly with `--bounds auto`, which places the scene \
