@@ -8,7 +8,8 @@ mod common;
 use std::path::Path;
 
 use common::capture::{
-    assert_fills_the_cube, assert_similar_cameras, photo_and_mask, pixels, surface_points, to_f64,
+    assert_fills_the_cube, assert_similar_cameras, photo_and_mask, pixels, stones_dataset,
+    surface_points, to_f64,
 };
 use common::lens_photos;
 
@@ -16,8 +17,7 @@ use glam::{DMat3, DQuat, DVec3};
 use rgbd_dataset::colmap::{import, ImportOptions};
 use rgbd_dataset::lens::{photo_through_lens, Lens, Undistortion};
 use rgbd_dataset::placement::UpFrom;
-use rgbd_dataset::scenes::StandingStones;
-use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
+use rgbd_dataset::{Dataset, DepthKind};
 
 const SIZE: usize = 24;
 
@@ -75,17 +75,6 @@ fn write_model(data: &Dataset, dir: &Path, camera: &str) -> Vec<DVec3> {
     placed
 }
 
-fn dataset(dir: &Path) -> Dataset {
-    let spec = DatasetSpec {
-        views: 6,
-        resolution: SIZE,
-        grid: 24,
-        seed: 3,
-    };
-    write_dataset(&StandingStones::new(3), dir, &spec).unwrap();
-    Dataset::load(dir, [1.0; 3]).unwrap()
-}
-
 fn pinhole(data: &Dataset) -> String {
     let c = &data.cameras()[0];
     format!(
@@ -97,7 +86,7 @@ fn pinhole(data: &Dataset) -> String {
 #[test]
 fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = dataset(&tmp.path().join("data"));
+    let data = stones_dataset(&tmp.path().join("data"), 3);
     let model = tmp.path().join("sparse");
     let points = write_model(&data, &model, &pinhole(&data));
     let options = ImportOptions {
@@ -145,7 +134,7 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
 #[test]
 fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = dataset(&tmp.path().join("data"));
+    let data = stones_dataset(&tmp.path().join("data"), 3);
     let model = tmp.path().join("sparse");
     write_model(&data, &model, &pinhole(&data));
     // The photos as a camera takes them: RGB, opaque; their alpha as separate masks.
@@ -226,7 +215,7 @@ fn masks_become_alpha_and_unusable_captures_are_refused_by_name() {
 #[test]
 fn photos_through_a_distorting_lens_come_back_as_the_pinhole_saw_them() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = dataset(&tmp.path().join("data"));
+    let data = stones_dataset(&tmp.path().join("data"), 3);
     let c = &data.cameras()[0];
     let k = [c.fx, c.fy, c.cx, c.cy].map(f64::from);
     // An OPENCV lens with strong barrel distortion (about two pixels at the corners).

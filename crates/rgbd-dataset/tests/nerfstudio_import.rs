@@ -10,13 +10,13 @@ use std::path::Path;
 mod common;
 
 use common::capture::{
-    assert_fills_the_cube, assert_similar_cameras, photo_and_mask, pixels, surface_points, to_f64,
+    assert_fills_the_cube, assert_similar_cameras, photo_and_mask, pixels, stones_dataset,
+    surface_points, to_f64,
 };
 use glam::{DMat3, DMat4, DVec3};
 use rgbd_dataset::nerfstudio::{import, read_points, ImportOptions};
 use rgbd_dataset::placement::{recorded_placement, UpFrom};
-use rgbd_dataset::scenes::StandingStones;
-use rgbd_dataset::{write_dataset, Dataset, DatasetSpec, DepthKind};
+use rgbd_dataset::{Dataset, DepthKind};
 use serde_json::{json, Value};
 
 const SIZE: usize = 24;
@@ -26,17 +26,6 @@ const SCALE: f64 = 0.4;
 const SHIFT: DVec3 = DVec3::new(-2.0, 5.0, 1.0);
 fn turn() -> DMat3 {
     DMat3::from_axis_angle(DVec3::new(-2.0, 1.0, 0.5).normalize(), 2.1)
-}
-
-fn dataset(dir: &Path) -> Dataset {
-    let spec = DatasetSpec {
-        views: 6,
-        resolution: SIZE,
-        grid: 24,
-        seed: 5,
-    };
-    write_dataset(&StandingStones::new(5), dir, &spec).unwrap();
-    Dataset::load(dir, [1.0; 3]).unwrap()
 }
 
 /// Writes `points` as nerfstudio's `create_ply_from_colmap` does: ASCII, float x y z with six
@@ -101,7 +90,7 @@ fn write_capture(data: &Dataset, data_dir: &Path, dir: &Path) -> Vec<DVec3> {
 fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
-    let data = dataset(&data_dir);
+    let data = stones_dataset(&data_dir, 5);
     let capture = tmp.path().join("capture");
     let points = write_capture(&data, &data_dir, &capture);
     let read = read_points(&capture.join("sparse_pc.ply")).unwrap();
@@ -143,7 +132,7 @@ fn an_imported_capture_has_the_cameras_up_to_a_similarity_upright_in_the_cube() 
 fn auto_bounds_of_a_capture_without_depth_come_from_its_points() {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
-    let data = dataset(&data_dir);
+    let data = stones_dataset(&data_dir, 5);
     let capture = tmp.path().join("capture");
     let points = write_capture(&data, &data_dir, &capture);
     let loaded = Dataset::load(&capture, [1.0; 3]).unwrap();
@@ -179,7 +168,7 @@ fn auto_bounds_of_a_capture_without_depth_come_from_its_points() {
 fn captures_that_cannot_be_placed_are_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
-    let data = dataset(&data_dir);
+    let data = stones_dataset(&data_dir, 5);
     let capture = tmp.path().join("capture");
     write_capture(&data, &data_dir, &capture);
     let file = capture.join("transforms.json");

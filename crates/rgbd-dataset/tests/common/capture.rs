@@ -3,7 +3,21 @@
 //! up to a similarity.
 
 use glam::{DMat3, DMat4, DQuat, DVec3};
-use rgbd_dataset::Dataset;
+use rgbd_dataset::scenes::StandingStones;
+use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
+
+/// The capture tests' scene: six views at 24^2 of the standing stones of layout `seed`, written
+/// to `dir` and loaded.
+pub fn stones_dataset(dir: &std::path::Path, seed: u64) -> Dataset {
+    let spec = DatasetSpec {
+        views: 6,
+        resolution: 24,
+        grid: 24,
+        seed,
+    };
+    write_dataset(&StandingStones::new(seed), dir, &spec).unwrap();
+    Dataset::load(dir, [1.0; 3]).unwrap()
+}
 
 /// A pose in f64.
 pub fn to_f64(m: glam::Mat4) -> DMat4 {
