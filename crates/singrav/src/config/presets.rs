@@ -15,10 +15,17 @@ use crate::error::{invalid, Result};
 /// 160 and 240: V*'s volume +0.6 and +0.4 dB).
 const TINY_ITERATIONS: [usize; 4] = [720, 480, 480, 80];
 
-/// Iterations per scale of the `small` preset: 240 and 160 at the coarse scales (`tiny`'s of
-/// an earlier day; `small` was not measured with `tiny`'s longer ones), then fewer where an
-/// iteration costs most (3.6 s at 57^3, 5.9 s for the upsampler at 216^2 on 2 cores).
-const SMALL_ITERATIONS: [usize; 5] = [240, 160, 160, 80, 40];
+/// Iterations per scale of the `small` preset: `tiny`'s 720 at the coarsest scale, where the
+/// layout forms (at 16^3 as cheap as `tiny`'s), then fewer where an iteration costs most (1.2 s
+/// at 43^3, 2.7 s at 57^3 and 2.5 s for the upsampler at 216^2 on 2 cores), to train within 12
+/// minutes on 2 cores.
+const SMALL_ITERATIONS: [usize; 5] = [720, 160, 120, 64, 40];
+
+/// Edge of the coarsest volume of `tiny` and `small`: the networks' 11-voxel fields (L = 5)
+/// span 11/16 of it. `small` had 24^3 (11/24): with `tiny`'s 3D critic and 720 coarsest
+/// iterations a quarter of the stones' matter still stood inside their ring (26.1%), at 16^3
+/// 0.7%, as in `tiny` (docs/journal/2026-12-arrangement.md).
+const CPU_COARSEST_VOLUME: usize = 16;
 
 /// The paper's table of training parameters (`tab:train_params`), first row (Stonehenge and
 /// most scenes): views per step of generated scenes and of the reconstruction at its 6 scales.
@@ -105,9 +112,11 @@ impl TrainConfig {
     ///   samples. Needs a GPU (see docs/training.md).
     /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
     ///   generated views.
-    /// - `small`: N = 5, volumes 24..57, renderings 32..108 (final 216^2), 16 channels,
-    ///   `tiny`'s training recipe with a shorter schedule of its own (fewest iterations at
-    ///   the costly fine scales); about 20 minutes on 2 CPU cores.
+    /// - `small`: N = 5, volumes 16, 32, 43, 57, renderings 32..108 (final 216^2), 16 channels,
+    ///   `tiny`'s training recipe, 3D critic and post-activated density without its
+    ///   binary-opacity prior, and a schedule of its own (fewest iterations at the costly fine
+    ///   scales); 10 to 11 minutes of training on 2 CPU cores (an AMD EPYC Zen 3,
+    ///   2026-12-04).
     /// - `tiny`: N = 4, volumes 16..28, renderings 24..54 (final 108^2), 16 channels, learning
     ///   rate 1e-3 (fewer iterations than the paper, so larger steps), reconstruction weights
     ///   5x the paper's, the samples' height profile, optimised reconstruction noise z*_n, the
@@ -130,20 +139,14 @@ impl TrainConfig {
                 island.schedule.scale_views = Some(table_views(&ISLAND_VIEWS));
                 Ok(island)
             }
-            "small" => Ok(cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS)),
+            "small" => {
+                let mut small = cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS);
+                small.pyramid.volume_sizes[0] = CPU_COARSEST_VOLUME;
+                Ok(arranged_and_sharp(small))
+            }
             "tiny" => {
-                let mut tiny = cpu_recipe(scaled("tiny", 4, 16, 24), &TINY_ITERATIONS);
-                // `tiny` only: on `small` the prior cost colour, V* and diversity.
-                tiny.losses.opacity_binary = TINY_OPACITY_BINARY;
-                tiny.losses.chroma_distribution = TINY_CHROMA;
-                // Sharper edges than a voxel: V* +2.8 dB, the samples' patches and colours
-                // closer on both scenes measured.
-                tiny.rendering.post_activation = true;
-                // The scene's arrangement (see `TINY_VOLUME_CRITIC`).
-                tiny.losses.volume_critic = TINY_VOLUME_CRITIC;
-                tiny.critics.volume_until_scale = Some(TINY_VOLUME_CRITIC_UNTIL);
-                tiny.critics.volume_seen_from_above = true;
-                Ok(tiny)
+                let tiny = cpu_recipe(scaled("tiny", 4, CPU_COARSEST_VOLUME, 24), &TINY_ITERATIONS);
+                Ok(arranged_and_sharp(with_binary_opacity(tiny)))
             }
             "micro" => {
                 let mut micro = scaled("micro", 3, 8, 12);
@@ -290,6 +293,26 @@ fn cpu_recipe(mut config: TrainConfig, iterations: &[usize]) -> TrainConfig {
     config.with_reconstruction_views(CPU_RECONSTRUCTION_VIEWS)
 }
 
+/// `tiny`'s binary-opacity prior of samples with the chroma-distribution loss that keeps their
+/// stones grey under it (`tiny` only: on `small` the prior cost colour, V* and diversity).
+fn with_binary_opacity(mut config: TrainConfig) -> TrainConfig {
+    config.losses.opacity_binary = TINY_OPACITY_BINARY;
+    config.losses.chroma_distribution = TINY_CHROMA;
+    config
+}
+
+/// The CPU presets' arrangement and sharpness: the 3D critic of the coarsest volumes as seen
+/// from above (see [`TINY_VOLUME_CRITIC`]), and post-activated density, sharper edges than a
+/// voxel (on `tiny` V* +2.8 dB, the samples' patches and colours closer on both scenes
+/// measured).
+fn arranged_and_sharp(mut config: TrainConfig) -> TrainConfig {
+    config.rendering.post_activation = true;
+    config.losses.volume_critic = TINY_VOLUME_CRITIC;
+    config.critics.volume_until_scale = Some(TINY_VOLUME_CRITIC_UNTIL);
+    config.critics.volume_seen_from_above = true;
+    config
+}
+
 /// Per-scale views from `(generated, reconstruction)` pairs.
 fn table_views(table: &[(usize, usize)]) -> Vec<ScaleViews> {
     table
@@ -395,29 +418,27 @@ mod tests {
             TrainConfig::preset("small").unwrap(),
         );
         small.validate().unwrap();
-        assert_eq!(small.pyramid.volume_sizes, [24, 32, 43, 57]);
+        // The coarsest volume at tiny's 16^3, where the layout forms, then the 4/3 ramp to 57^3.
+        assert_eq!(small.pyramid.volume_sizes, [16, 32, 43, 57]);
         assert_eq!(small.pyramid.image_sizes, [32, 48, 72, 108]);
         assert_eq!(small.final_image_size(), 216);
         let iterations: Vec<_> = small.schedule.scales.iter().map(|s| s.iterations).collect();
-        assert_eq!(iterations, [240, 160, 160, 80, 40]);
+        assert_eq!(iterations, [720, 160, 120, 64, 40]);
         assert!(small
             .schedule
             .scales
             .iter()
             .all(|s| s.reconstruction_only * 4 == s.iterations));
-        // Everything but the sizes, the schedule, the binary-opacity prior (which cost small
-        // colour, V* and diversity), the chroma loss that goes with it, the post-activated
-        // density and the 3D critic of the layout (measured on tiny only) is tiny's.
+        // Everything but the sizes, the schedule and the binary-opacity prior with its chroma
+        // loss (which cost small colour, V* and diversity) is tiny's: the 3D critic of the
+        // layout and the post-activated density included.
         assert_eq!(small.losses.opacity_binary, 0.0);
         assert_eq!(small.losses.chroma_distribution, 0.0);
-        assert!(!small.rendering.post_activation);
-        assert_eq!(small.losses.volume_critic, 0.0);
+        assert!(small.rendering.post_activation);
+        assert_eq!(small.losses.volume_critic, 0.3);
         let mut resized = small.clone();
         resized.losses.opacity_binary = tiny.losses.opacity_binary;
         resized.losses.chroma_distribution = tiny.losses.chroma_distribution;
-        resized.rendering.post_activation = tiny.rendering.post_activation;
-        resized.losses.volume_critic = tiny.losses.volume_critic;
-        resized.critics = tiny.critics.clone();
         resized.preset = tiny.preset.clone();
         resized.pyramid.volume_sizes = tiny.pyramid.volume_sizes.clone();
         resized.pyramid.image_sizes = tiny.pyramid.image_sizes.clone();
