@@ -24,7 +24,7 @@ const SMALL_ITERATIONS: [usize; 5] = [720, 160, 120, 64, 40];
 /// Edge of the coarsest volume of `tiny` and `small`: the networks' 11-voxel fields (L = 5)
 /// span 11/16 of it. `small` had 24^3 (11/24): with `tiny`'s 3D critic and 720 coarsest
 /// iterations a quarter of the stones' matter still stood inside their ring (26.1%), at 16^3
-/// 0.7%, as in `tiny` (docs/journal/2026-12-arrangement.md).
+/// 0.4-0.7% over three seeds, as in `tiny` (docs/journal/2026-12-arrangement.md).
 const CPU_COARSEST_VOLUME: usize = 16;
 
 /// The paper's table of training parameters (`tab:train_params`), first row (Stonehenge and
