@@ -16,9 +16,9 @@ use crate::error::{invalid, Result};
 const TINY_ITERATIONS: [usize; 4] = [720, 480, 480, 80];
 
 /// Iterations per scale of the `small` preset: `tiny`'s 720 at the coarsest scale, where the
-/// layout forms (at 16^3 as cheap as `tiny`'s), then fewer where an iteration costs most (1.2 s
-/// at 43^3, 2.7 s at 57^3 and 2.5 s for the upsampler at 216^2 on 2 cores), to train within 12
-/// minutes on 2 cores.
+/// layout forms (at 16^3 as cheap as `tiny`'s), then fewer where an iteration costs most (1.0 s
+/// at 43^3, 2.3-2.5 s at 57^3 and 2.8-2.9 s for the upsampler at 216^2 on 2 Zen 3 cores), to
+/// train within 12 minutes on 2 cores.
 const SMALL_ITERATIONS: [usize; 5] = [720, 160, 120, 64, 40];
 
 /// Edge of the coarsest volume of `tiny` and `small`: the networks' 11-voxel fields (L = 5)
@@ -63,18 +63,18 @@ const TINY_OPACITY_BINARY: f64 = 3.0;
 /// metrics within the seeds' spread.
 const TINY_CHROMA: f64 = 100.0;
 
-/// Weight of `tiny`'s 3D critic ([`Losses::volume_critic`]), at the coarsest scale only
-/// ([`TINY_VOLUME_CRITIC_UNTIL`]) and seeing each voxel as a ray from above meets it
-/// ([`Critics::volume_seen_from_above`]). The coarsest scale makes the layout, and 2D critics of
+/// Weight of the CPU presets' 3D critic ([`Losses::volume_critic`]), measured on `tiny`, at
+/// the coarsest scale only ([`CPU_VOLUME_CRITIC_UNTIL`]) and seeing each voxel as a ray from
+/// above meets it ([`Critics::volume_seen_from_above`]). The coarsest scale makes the layout, and 2D critics of
 /// 24^2 renderings let it go: without it a fifth to a quarter of the stones' matter stood inside
 /// their ring, about 1% with it. Over three seeds of the stones, the islands and the mushrooms,
 /// the samples' layout distance came to 0.89-1.47x that of other true layouts of each scene
 /// (means 1.21x, 1.31x, 1.00x), with patch SWD-MV, colour SWD and floaters at or below those
 /// without it (docs/journal/2026-12-arrangement.md).
-const TINY_VOLUME_CRITIC: f64 = 0.3;
+const CPU_VOLUME_CRITIC: f64 = 0.3;
 
-/// The last scale `tiny`'s 3D critic judges: the coarsest, where the layout is made.
-const TINY_VOLUME_CRITIC_UNTIL: usize = 1;
+/// The last scale the CPU presets' 3D critic judges: the coarsest, where the layout is made.
+const CPU_VOLUME_CRITIC_UNTIL: usize = 1;
 
 /// Weight of the colour-distribution loss in every preset ([`Losses::colour_distribution`]).
 const LAMBDA_COLOUR: f64 = 20.0;
@@ -302,13 +302,13 @@ fn with_binary_opacity(mut config: TrainConfig) -> TrainConfig {
 }
 
 /// The CPU presets' arrangement and sharpness: the 3D critic of the coarsest volumes as seen
-/// from above (see [`TINY_VOLUME_CRITIC`]), and post-activated density, sharper edges than a
+/// from above (see [`CPU_VOLUME_CRITIC`]), and post-activated density, sharper edges than a
 /// voxel (on `tiny` V* +2.8 dB, the samples' patches and colours closer on both scenes
 /// measured).
 fn arranged_and_sharp(mut config: TrainConfig) -> TrainConfig {
     config.rendering.post_activation = true;
-    config.losses.volume_critic = TINY_VOLUME_CRITIC;
-    config.critics.volume_until_scale = Some(TINY_VOLUME_CRITIC_UNTIL);
+    config.losses.volume_critic = CPU_VOLUME_CRITIC;
+    config.critics.volume_until_scale = Some(CPU_VOLUME_CRITIC_UNTIL);
     config.critics.volume_seen_from_above = true;
     config
 }
