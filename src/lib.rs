@@ -35,7 +35,16 @@ pub use volrender as render;
 pub use volume_fit as fit;
 pub use volume_mesh as mesh;
 
-/// The types most users need.
+/// The types most users need: every crate's own prelude (but patch-gan's and conv-kernels',
+/// which have none yet).
 pub mod prelude {
+    pub use csg_embed::prelude::*;
     pub use radiance_volume::prelude::*;
+    pub use rgbd_dataset::prelude::*;
+    pub use scene_metrics::prelude::*;
+    pub use singrav::prelude::*;
+    pub use swd_loss::prelude::*;
+    pub use volrender::prelude::*;
+    pub use volume_fit::prelude::*;
+    pub use volume_mesh::prelude::*;
 }

@@ -1,6 +1,7 @@
 //! The `volgen` binary end to end: info, export and render on a small volume, and clear errors.
 
 use std::path::Path;
+use std::process::{Command, Stdio};
 
 use radiance_volume::{Aabb, GridDims, RadianceVolume};
 
@@ -16,6 +17,30 @@ fn small_volume(dir: &Path) -> String {
     let path = dir.join("ball.safetensors");
     v.save_safetensors(&path).unwrap();
     path.to_string_lossy().into_owned()
+}
+
+/// Piped into a reader that stops early (`volgen info FILE | head -3`), a command stops quietly:
+/// no panic, no "Broken pipe", whatever it was printing.
+#[test]
+fn a_closed_pipe_ends_a_command_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = small_volume(dir.path());
+    for args in [vec!["info", vol.as_str()], vec!["help", "train"], vec!["--help"]] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_volgen"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The reader is gone before the first line comes.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !err.contains("panicked") && !err.contains("Broken pipe"),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 #[test]

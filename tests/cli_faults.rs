@@ -12,7 +12,8 @@ use std::time::{Duration, Instant};
 use candle_core::Device;
 use common::{failure, ok, path, stones_dataset};
 use rand::{Rng, SeedableRng};
-use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::checkpoint::Checkpoint;
+use singrav::RunDir;
 
 /// `volgen train` of the micro preset with a checkpoint after every iteration, so kills and
 /// full disks meet checkpoint writes often; `--resume` once the run directory exists (as a user
@@ -37,7 +38,7 @@ fn train_command(data: &Path, run: &Path) -> Command {
 
 /// Every tensor of `run`'s checkpoint, as bits.
 fn checkpoint_bits(run: &Path) -> Vec<(String, Vec<u32>)> {
-    let checkpoint = Checkpoint::load(&run.join(CHECKPOINT_FILE), &Device::Cpu).unwrap();
+    let checkpoint = Checkpoint::load(&RunDir::new(&run).checkpoint(), &Device::Cpu).unwrap();
     let mut tensors: Vec<(String, Vec<u32>)> = checkpoint
         .tensors
         .iter()
@@ -139,7 +140,7 @@ fn a_full_disk_names_the_file_and_its_size_and_keeps_the_last_checkpoint() {
     let whole = uninterrupted(tmp.path(), &data);
     // A file-size limit between the smallest and the largest checkpoint of the run: the first
     // checkpoints fit, a later (larger) one does not.
-    let final_size = std::fs::metadata(whole.join(CHECKPOINT_FILE))
+    let final_size = std::fs::metadata(RunDir::new(&whole).checkpoint())
         .unwrap()
         .len();
     let limit = final_size * 13 / 10;
@@ -165,7 +166,7 @@ fn a_full_disk_names_the_file_and_its_size_and_keeps_the_last_checkpoint() {
         "{err}"
     );
     // The previous checkpoint is intact and short of the end; no temporary file is left.
-    let saved = Checkpoint::load(&run.join(CHECKPOINT_FILE), &Device::Cpu).unwrap();
+    let saved = Checkpoint::load(&RunDir::new(&run).checkpoint(), &Device::Cpu).unwrap();
     assert!(saved.state.scale >= 2, "{:?}", saved.state);
     let leftovers: Vec<_> = std::fs::read_dir(&run)
         .unwrap()

@@ -243,3 +243,36 @@ fn fit_names_bad_input() {
     ]));
     assert!(err.contains("missing.safetensors"), "{err}");
 }
+
+/// A dataset that does not say how its depth maps measure depth (as Blender's exporters write
+/// them): the kind is asked for only where the depth is used, so `--no-depth` needs none, for
+/// `fit` as for `train`.
+#[test]
+fn without_depth_no_depth_kind_is_asked_for() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = stones_dataset(tmp.path());
+    let transforms = data.join("transforms.json");
+    let mut root: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&transforms).unwrap()).unwrap();
+    root.as_object_mut().unwrap().remove("depth_kind");
+    std::fs::write(&transforms, root.to_string()).unwrap();
+    let out = tmp.path().join("v.safetensors");
+    let fit = |extra: &[&str]| {
+        let mut args = vec!["fit", path(&data), "--steps", "2", "--size", "8"];
+        args.extend_from_slice(&["--out", path(&out)]);
+        args.extend_from_slice(extra);
+        volgen(&args)
+    };
+    let err = failure(&fit(&[]));
+    assert!(err.contains("--depth-kind"), "{err}");
+    ok(&fit(&["--no-depth"]));
+    let train = |extra: &[&str]| {
+        let mut args = vec!["train", path(&data), "--preset", "micro", "--iterations", "1"];
+        args.extend_from_slice(extra);
+        volgen(&args)
+    };
+    let run = tmp.path().join("run");
+    let err = failure(&train(&["--out", path(&run)]));
+    assert!(err.contains("--depth-kind"), "{err}");
+    ok(&train(&["--out", path(&run), "--no-depth"]));
+}

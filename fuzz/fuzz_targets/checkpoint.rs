@@ -11,7 +11,7 @@ use singrav::SinGrav;
 
 fuzz_target!(|bytes: &[u8]| {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(singrav::checkpoint::CHECKPOINT_FILE);
+    let path = singrav::RunDir::new(dir.path()).checkpoint();
     std::fs::write(&path, bytes).unwrap();
     let Ok((model, _state)) = SinGrav::load(&path, &Device::Cpu) else {
         return;

@@ -16,7 +16,7 @@ use super::model_io::{load_model, write_scene, Outputs};
 /// Arguments of `volgen animate`.
 #[derive(Debug, clap::Args)]
 pub struct AnimateArgs {
-    /// A trained model: a run directory or its checkpoint.safetensors.
+    /// A trained model: a run directory or its checkpoint.
     model: PathBuf,
     /// How many frames to write.
     #[arg(long, default_value_t = 24)]

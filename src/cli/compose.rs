@@ -24,7 +24,7 @@ use super::scene_boxes::{parse_box, parse_offset, ModelFrame};
 /// Arguments of `volgen compose`.
 #[derive(Debug, clap::Args)]
 pub struct ComposeArgs {
-    /// A trained model: a run directory or its checkpoint.safetensors.
+    /// A trained model: a run directory or its checkpoint.
     model: PathBuf,
     /// Output directory.
     #[arg(long, value_name = "DIR")]

@@ -11,10 +11,10 @@ use candle_core::Tensor;
 use rgbd_dataset::scenes::SceneKind;
 use rgbd_dataset::{write_built_in, DatasetSpec};
 use serde::Serialize;
-use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::checkpoint::Checkpoint;
 use singrav::sample::Sample;
-use singrav::train::RunOptions;
-use singrav::SinGrav;
+use singrav::train::{read_log, LogLine, LossTerm, RunOptions};
+use singrav::{RunDir, SinGrav};
 
 use super::model_io::Outputs;
 use super::sample::{sample_to_dir, Draws, Views};
@@ -26,8 +26,8 @@ pub struct DemoArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "out/demo")]
     out: PathBuf,
-    /// The built-in scene to learn: stones, mushrooms or islands.
-    #[arg(long, default_value = "stones")]
+    /// The built-in scene to learn.
+    #[arg(long, default_value = "stones", value_parser = super::scene::built_in_scenes())]
     scene: SceneKind,
     /// Scenes to generate.
     #[arg(long, default_value_t = 4)]
@@ -45,25 +45,6 @@ pub struct DemoArgs {
 /// Frames of each sample's turntable GIF.
 const DEMO_TURNTABLE_FRAMES: usize = 36;
 
-/// The losses of the last logged iteration of a scale, as the table shows them (the log's
-/// names).
-const LOSS_COLUMNS: [(&str, &str); 14] = [
-    ("color", "reconstruction"),
-    ("depth", "depth"),
-    ("opacity", "opacity"),
-    ("colour_distribution", "colour distribution"),
-    ("chroma_distribution", "chroma distribution"),
-    ("height_profile", "height profile"),
-    ("opacity_binary", "binary opacity"),
-    ("critic", "critic"),
-    ("penalty", "gradient penalty"),
-    ("adversarial", "adversarial"),
-    ("swd", "SWD"),
-    ("volume_critic", "3D critic"),
-    ("volume_penalty", "3D gradient penalty"),
-    ("volume_adversarial", "3D adversarial"),
-];
-
 /// The summary written to `summary.json` (and, readably, `summary.md`).
 #[derive(Debug, Serialize)]
 struct Summary {
@@ -73,7 +54,7 @@ struct Summary {
     training_seconds: f64,
     scale_seconds: Vec<f64>,
     scale_peak_mib: Vec<Option<f64>>,
-    final_losses: Vec<serde_json::Value>,
+    final_losses: Vec<LogLine>,
     generation_seconds: Vec<f64>,
     /// The paper's Diversity-MV of the samples against the input views they are shown beside.
     diversity_mv: Option<f64>,
@@ -91,6 +72,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let config = args.train.config()?;
     let dataset_dir = args.out.join("dataset");
     let run_dir = args.out.join("run");
+    let run = RunDir::new(&run_dir);
     let samples_dir = args.out.join("samples");
 
     let started = Instant::now();
@@ -100,7 +82,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let spec = DatasetSpec {
         views: args.views,
         resolution,
-        seed: args.train.seed,
+        seed: config.run.seed,
         ..DatasetSpec::default()
     };
     println!(
@@ -109,13 +91,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         spec.views,
         dataset_dir.display()
     );
-    write_built_in(args.scene, args.train.seed, &dataset_dir, &spec)
+    write_built_in(args.scene, config.run.seed, &dataset_dir, &spec)
         .with_context(|| format!("writing the dataset to {}", dataset_dir.display()))?;
     let dataset_seconds = started.elapsed().as_secs_f64();
     let dataset = load_dataset(&dataset_dir, &config, None)?;
 
     // A run left by an earlier demo with the same settings is continued, not overwritten.
-    let resume = args.train.resume || run_dir.join(CHECKPOINT_FILE).exists();
+    let resume = args.train.resume || run.has_checkpoint();
     println!(
         "2/3 training the `{}` preset ({} scales, {} iterations){} -> {}",
         config.preset,
@@ -126,10 +108,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
     let options = RunOptions {
         resume,
-        ..args.train.run_options(&config, &dataset, &run_dir)?
+        ..args.train.run_options()
     };
     let model = train_with_progress(&config, &dataset, &run_dir, &options)?;
-    let state = Checkpoint::load(&run_dir.join(CHECKPOINT_FILE), model.device())?.state;
+    let state = Checkpoint::load(&run.checkpoint(), model.device())?.state;
 
     println!(
         "3/3 sampling {} scenes -> {}",
@@ -149,7 +131,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let views = Views::with_cameras(&model, cameras, Some(DEMO_TURNTABLE_FRAMES))?;
     let draws = Draws {
         count: args.count,
-        seed: args.train.seed,
+        seed: config.run.seed,
         vary_from: 1,
     };
     let samples = sample_to_dir(&model, &views, draws, &samples_dir, outputs)?;
@@ -168,7 +150,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         training_seconds: state.scale_seconds.iter().sum(),
         scale_seconds: state.scale_seconds.clone(),
         scale_peak_mib: state.scale_peak_mib.clone(),
-        final_losses: last_losses_per_scale(&run_dir)?,
+        final_losses: last_losses_per_scale(&run)?,
         generation_seconds: samples.iter().map(|s| s.generation_seconds).collect(),
         diversity_mv,
         overview: overview.clone(),
@@ -179,7 +161,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             .collect(),
         samples: samples_dir,
         scale_pictures: (1..=config.scales())
-            .map(|n| run_dir.join("samples").join(format!("scale_{n}.png")))
+            .map(|n| run.scale_picture(n))
             .collect(),
     };
     write_summary(&args.out, &summary)?;
@@ -223,23 +205,12 @@ fn input_views_at_sample_size(
 }
 
 /// The last logged losses of every scale.
-fn last_losses_per_scale(run_dir: &Path) -> Result<Vec<serde_json::Value>> {
-    let path = run_dir.join("log.jsonl");
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut last: Vec<serde_json::Value> = Vec::new();
-    for line in text.lines() {
-        let value: serde_json::Value =
-            serde_json::from_str(line).with_context(|| format!("parsing {}", path.display()))?;
-        let scale = value
-            .get("scale")
-            .and_then(serde_json::Value::as_u64)
-            .unwrap_or(0);
+fn last_losses_per_scale(run: &RunDir) -> Result<Vec<LogLine>> {
+    let mut last: Vec<LogLine> = Vec::new();
+    for line in read_log(run)? {
         match last.last_mut() {
-            Some(prev) if prev.get("scale").and_then(serde_json::Value::as_u64) == Some(scale) => {
-                *prev = value;
-            }
-            _ => last.push(value),
+            Some(prev) if prev.scale == line.scale => *prev = line,
+            _ => last.push(line),
         }
     }
     Ok(last)
@@ -300,22 +271,16 @@ fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
 /// The time, memory and last logged losses of every scale as a Markdown table, "-" where a
 /// loss is not computed at that scale; a loss the run never computed has no column.
 fn loss_table(summary: &Summary) -> String {
-    let value = |i: usize, key: &str| {
-        summary
-            .final_losses
-            .get(i)
-            .and_then(|l| l.get(key))
-            .and_then(serde_json::Value::as_f64)
-    };
+    let value = |i: usize, term: LossTerm| summary.final_losses.get(i)?.losses.get(term);
     let scales = summary.scale_seconds.len();
     // Only the terms this run computed somewhere (the 3D critic's, for one, are rare).
-    let columns: Vec<_> = LOSS_COLUMNS
-        .iter()
-        .filter(|(key, _)| (0..scales).any(|i| value(i, key).is_some()))
+    let columns: Vec<LossTerm> = LossTerm::ALL
+        .into_iter()
+        .filter(|&term| (0..scales).any(|i| value(i, term).is_some()))
         .collect();
     let mut table = String::from("| scale | seconds | peak MiB | iterations |");
-    for (_, title) in &columns {
-        table.push_str(&format!(" {title} |"));
+    for term in &columns {
+        table.push_str(&format!(" {} |", term.describe()));
     }
     table.push_str(&format!("\n|{}\n", "---|".repeat(4 + columns.len())));
     for (i, seconds) in summary.scale_seconds.iter().enumerate() {
@@ -324,16 +289,14 @@ fn loss_table(summary: &Summary) -> String {
         let iterations = summary
             .final_losses
             .get(i)
-            .and_then(|l| l.get("iteration"))
-            .and_then(serde_json::Value::as_u64)
-            .map_or("-".into(), |it| (it + 1).to_string());
+            .map_or("-".into(), |l| (l.iteration + 1).to_string());
         table.push_str(&format!(
             "| {} | {seconds:.0} | {} | {iterations} |",
             i + 1,
             mib.map_or("n/a".into(), |m| format!("{m:.0}")),
         ));
-        for (key, _) in &columns {
-            let cell = value(i, key).map_or("-".into(), |v| format!("{v:.4}"));
+        for &term in &columns {
+            let cell = value(i, term).map_or("-".into(), |v| format!("{v:.4}"));
             table.push_str(&format!(" {cell} |"));
         }
         table.push('\n');

@@ -21,7 +21,7 @@ use super::scene_boxes::{parse_box, parse_offset, ModelFrame};
 /// Arguments of `volgen edit`.
 #[derive(Debug, clap::Args)]
 pub struct EditArgs {
-    /// A trained model: a run directory or its checkpoint.safetensors.
+    /// A trained model: a run directory or its checkpoint.
     model: PathBuf,
     /// Seed of the scene to edit (the scene `volgen sample --seed S` writes first).
     #[arg(long, default_value_t = 0)]

@@ -13,7 +13,6 @@ use anyhow::{ensure, Context, Result};
 use rgbd_dataset::DepthKind;
 use scene_metrics::{Estimate, InceptionBlock1, PATCH_SWD_MIN_SIDE};
 use serde::Serialize;
-use singrav::checkpoint::checkpoint_path;
 use singrav::eval::{evaluate, EvalConfig, Evaluation, LayoutReference, SceneScores};
 
 /// Arguments of `volgen eval`.
@@ -22,8 +21,8 @@ use singrav::eval::{evaluate, EvalConfig, Evaluation, LayoutReference, SceneScor
     (--scenes 50 --views 40); the defaults take about half a minute on the tiny \
     preset. docs/metrics.md explains the numbers and how to convert InceptionV3's weights.")]
 pub struct EvalArgs {
-    /// Trained models: run directories or their checkpoint.safetensors. With several, a
-    /// Markdown table compares them (each still writes eval.json in its run directory).
+    /// Trained models: run directories or their checkpoints. With several, a Markdown table
+    /// compares them (each still writes its numbers into its run directory).
     #[arg(required = true, value_name = "RUN")]
     models: Vec<PathBuf>,
     /// The dataset the models were trained on (a transforms.json or its directory): its images
@@ -65,8 +64,8 @@ pub struct EvalArgs {
     /// SIFID-MV is not computed.
     #[arg(long, value_name = "FILE")]
     inception: Option<PathBuf>,
-    /// Where to write the numbers as JSON (default: eval.json in the run directory); only
-    /// with a single run.
+    /// Where to write the numbers as JSON (default: into the run directory, docs/training.md's
+    /// "Files of a run"); only with a single run.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     /// With several runs of one setting (other seeds), end the table with a row of each
@@ -76,7 +75,7 @@ pub struct EvalArgs {
     mean: bool,
 }
 
-/// What `eval.json` holds: the paths, then the library's numbers.
+/// What the numbers' JSON file holds: the paths, then the library's numbers.
 #[derive(Debug, Serialize)]
 struct EvalFile {
     model: PathBuf,
@@ -100,8 +99,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     );
     ensure!(
         args.out.is_none() || args.models.len() == 1,
-        "--out names one file, for a single run; with several runs each writes eval.json in \
-         its run directory"
+        "--out names one file, for a single run; with several runs each writes its numbers \
+         into its run directory"
     );
     let device = device()?;
     // Weights first: a wrong path should fail before minutes of generation.
@@ -117,7 +116,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         let out = args
             .out
             .clone()
-            .unwrap_or_else(|| run_dir(model).join("eval.json"));
+            .unwrap_or_else(|| singrav::RunDir::of_model(model).eval());
         radiance_volume::io::write_bytes_atomic(
             &out,
             format!("{}\n", serde_json::to_string_pretty(&evaluation)?).as_bytes(),
@@ -424,12 +423,4 @@ fn cell(value: Option<f64>, stderr: Option<f64>, digits: usize) -> String {
         (Some(value), None) => format!("{value:.digits$}"),
         (None, _) => "-".to_string(),
     }
-}
-
-/// The run directory of `model` (the directory itself, or the one holding the checkpoint).
-fn run_dir(model: &Path) -> PathBuf {
-    checkpoint_path(model)
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default()
 }

@@ -7,14 +7,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{ensure, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use rgbd_dataset::{Dataset, DepthKind};
+use rgbd_dataset::{Bounds, Dataset, DepthKind};
 use serde::Serialize;
 use singrav::TrainConfig;
 use volume_fit::{fit_volume, render_views, view_psnr, FitBudget, FitConfig, FittedVolume};
 
 use super::export::{write_exr_slices, write_vdb, Encoding};
 use super::model_io::default_upsample;
-use super::train::{load_dataset, scene_bounds};
+use super::train::{load_dataset, scene_bounds, warn_if_beyond_the_cube};
 
 /// Arguments of `volgen fit`.
 #[derive(Debug, clap::Args)]
@@ -68,9 +68,10 @@ pub struct FitArgs {
     /// Where the scene is: `xmin,ymin,zmin,xmax,ymax,zmax` or `auto` (as `volgen train
     /// --bounds`). The volume covers the model's cube around that box, in the scene's own
     /// coordinates; without it, [-1, 1]^3.
-    #[arg(long, value_name = "BOX|auto")]
-    bounds: Option<String>,
-    /// Fit colour and opacity only, ignoring the dataset's depth.
+    #[arg(long, value_name = "BOX|auto", allow_hyphen_values = true)]
+    bounds: Option<Bounds>,
+    /// Fit colour and opacity only: the dataset's depth maps are not read (nor is their kind
+    /// asked for), unless `--bounds auto` places the scene by them.
     #[arg(long)]
     no_depth: bool,
     /// Render with post-activated density (DVGO's rule: samples activate the interpolated raw
@@ -134,10 +135,16 @@ pub fn run(args: &FitArgs) -> Result<()> {
     }
     let mut config = fit_config(args)?;
     let training_config = TrainConfig::preset("tiny")?;
-    let dataset = load_dataset(&args.dataset, &training_config, args.depth_kind)?;
+    let depth_kind = if args.no_depth && args.bounds != Some(Bounds::Auto) {
+        Some(DepthKind::None)
+    } else {
+        args.depth_kind
+    };
+    let dataset = load_dataset(&args.dataset, &training_config, depth_kind)?;
     config.use_depth &= dataset.depth_kind() != DepthKind::None;
-    if let Some(bounds) = scene_bounds(args.bounds.as_deref(), &dataset)? {
-        config.aabb = bounds.cube();
+    match &args.bounds {
+        Some(bounds) => config.aabb = scene_bounds(bounds, &dataset)?.cube(),
+        None => warn_if_beyond_the_cube(&dataset),
     }
     let (training, held_out) = match args.holdout {
         Some(every) => dataset.holdout_split(every)?,
@@ -234,35 +241,44 @@ fn fit_with_progress(
     training: &[usize],
     config: &FitConfig,
 ) -> Result<FittedVolume> {
-    with_fit_progress(dataset, |observer| {
-        Ok(fit_volume(dataset, training, config, observer)?)
-    })
+    let bar = FitBar::new()?;
+    let fitted = fit_volume(dataset, training, config, &mut |p| bar.show("the views", p))
+        .with_context(|| format!("fitting {}", dataset_name(dataset)))?;
+    bar.finish();
+    Ok(fitted)
 }
 
-/// Runs `fit` with a progress bar of the fit's steps (grid size, batch PSNR, live voxels).
-pub fn with_fit_progress(
-    dataset: &Dataset,
-    fit: impl FnOnce(&mut dyn FnMut(&volume_fit::FitProgress)) -> Result<FittedVolume>,
-) -> Result<FittedVolume> {
-    let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:28}] {msg}")
-            .context("progress bar template")?
-            .progress_chars("=> "),
-    );
-    let fitted = fit(&mut |p| {
-        bar.set_position((p.fraction * 1000.0) as u64);
-        bar.set_message(format!(
-            "step {} grid {}^3 batch PSNR {:.2} dB, {:.0}% voxels live",
+/// A progress bar of a fit's steps (grid size, batch PSNR, live voxels).
+pub struct FitBar(ProgressBar);
+
+impl FitBar {
+    /// A bar on stderr, hidden without a terminal.
+    pub fn new() -> Result<Self> {
+        let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:28}] {msg}")
+                .context("progress bar template")?
+                .progress_chars("=> "),
+        );
+        Ok(Self(bar))
+    }
+
+    /// Shows the progress of the fit of `what`.
+    pub fn show(&self, what: &str, p: &volume_fit::FitProgress) {
+        self.0.set_position((p.fraction * 1000.0) as u64);
+        self.0.set_message(format!(
+            "fitting {what}: step {} grid {}^3 batch PSNR {:.2} dB, {:.0}% voxels live",
             p.step,
             p.size,
             p.batch_psnr,
             100.0 * p.live_fraction
         ));
-    })
-    .with_context(|| format!("fitting {}", dataset_name(dataset)))?;
-    bar.finish_and_clear();
-    Ok(fitted)
+    }
+
+    /// Clears the bar.
+    pub fn finish(self) {
+        self.0.finish_and_clear();
+    }
 }
 
 fn dataset_name(dataset: &Dataset) -> String {

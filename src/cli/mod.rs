@@ -22,6 +22,7 @@ mod render;
 mod sample;
 mod scene;
 mod scene_boxes;
+mod settings;
 mod to_capture;
 mod train;
 
@@ -45,7 +46,7 @@ enum Command {
     Render(render::RenderArgs),
     /// Reconstruct a dataset's scene directly as one radiance volume (no networks): VDB/EXR, PSNR.
     Fit(fit::FitArgs),
-    /// Render a built-in scene (stones, mushrooms, islands) into an RGB-D transforms.json dataset.
+    /// Render a built-in scene into an RGB-D transforms.json dataset.
     Scene(scene::SceneArgs),
     /// Turn a capture of your own photos (a COLMAP reconstruction) into a dataset.
     Import(import::ImportArgs),

@@ -18,7 +18,7 @@ use super::model_io::{load_model, write_scene, Outputs};
 /// Arguments of `volgen sample`.
 #[derive(Debug, clap::Args)]
 pub struct SampleArgs {
-    /// A trained model: a run directory or its checkpoint.safetensors.
+    /// A trained model: a run directory or its checkpoint.
     model: PathBuf,
     /// How many scenes to generate.
     #[arg(long, default_value_t = 4)]

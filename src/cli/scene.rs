@@ -10,7 +10,8 @@ use rgbd_dataset::{write_built_in, DatasetSpec};
 /// Arguments of `volgen scene`.
 #[derive(Debug, clap::Args)]
 pub struct SceneArgs {
-    /// The scene: stones, mushrooms or islands.
+    /// The built-in scene.
+    #[arg(value_parser = built_in_scenes())]
     name: SceneKind,
     /// Output directory (transforms.json, images/, depth/).
     #[arg(long, value_name = "DIR")]
@@ -27,6 +28,14 @@ pub struct SceneArgs {
     /// Seed of the scene's layout and of the camera placement.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+}
+
+/// The built-in scenes as a command line takes them, each with what it is (`--help` lists
+/// them).
+pub fn built_in_scenes() -> impl clap::builder::TypedValueParser<Value = SceneKind> {
+    let names = SceneKind::ALL.map(|kind| clap::builder::PossibleValue::new(kind.name()).help(kind.about()));
+    clap::builder::PossibleValuesParser::new(names)
+        .try_map(|name: String| name.parse::<SceneKind>())
 }
 
 /// Bakes, renders and writes the dataset, then says where.

@@ -4,23 +4,25 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use radiance_volume::RadianceVolume;
-use rgbd_dataset::{Dataset, DepthKind, LoadOptions, SceneBounds};
-use singrav::checkpoint::CHECKPOINT_FILE;
+use rgbd_dataset::{Bounds, Dataset, DepthKind, LoadOptions, SceneBounds};
 use singrav::train::{
-    train, Control, Event, LossTerm, Progress, RunOptions, StepLosses, TrainOutcome,
+    prepare, Control, Event, LossTerm, Progress, RunFit, RunOptions, StepLosses, TrainOutcome,
+    Trainer,
 };
-use singrav::{SinGrav, SwdFeatures, TrainConfig};
-use volume_fit::FitConfig;
+use singrav::{RunDir, SinGrav, SwdFeatures, TrainConfig};
+
+use super::fit::FitBar;
+use super::settings::{names_setting, Settings};
 
 /// Arguments of `volgen train`.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
     /// The dataset: a transforms.json or the directory holding it.
     dataset: PathBuf,
-    /// The run directory (checkpoint, config.json, log.jsonl, samples/).
+    /// The run directory: checkpoint, configuration, loss log and pictures (docs/training.md,
+    /// "Files of a run").
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// How the dataset's depth maps measure depth, overriding its `depth_kind`: expected
@@ -34,12 +36,12 @@ pub struct TrainArgs {
     /// scene's coordinates. Without it the scene must lie in [-1, 1]^3. Give it again with
     /// --resume.
     #[arg(long, value_name = "BOX|auto", allow_hyphen_values = true)]
-    bounds: Option<String>,
+    bounds: Option<Bounds>,
     /// Depth from a fit of the views (the paper's NeRF-depth), for photos without depth maps:
-    /// fits the training views without depth (`volgen fit`'s defaults, 64^3; written to
-    /// RUN/depth_fit.safetensors and reused by --resume), renders its depth from every camera
-    /// and trains with it, pixels the fit leaves thin left out of the depth loss. Replaces
-    /// the dataset's own depth maps where it has some. Give it again with --resume.
+    /// fits the training views without depth (`volgen fit`'s defaults, 64^3; kept in the run
+    /// and reused by --resume), renders its depth from every camera and trains with it, pixels
+    /// the fit leaves thin left out of the depth loss. Replaces the dataset's own depth maps
+    /// where it has some. Give it again with --resume.
     #[arg(long, conflicts_with = "no_depth")]
     depth_from_fit: bool,
     /// Steps of the fit --depth-from-fit runs (default: `volgen fit`'s).
@@ -52,9 +54,8 @@ pub struct TrainArgs {
 /// Training settings shared by `train` and `demo`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct TrainOptions {
-    /// Preset: paper (GPU), small (216^2, about 11 minutes on 2 cores), tiny (108^2, about 10)
-    /// or micro (seconds).
-    #[arg(long, default_value = "tiny")]
+    /// The preset the configuration starts from.
+    #[arg(long, default_value = "tiny", value_parser = presets())]
     pub preset: String,
     /// Continue a killed run from its last checkpoint (with the same settings; a run whose
     /// reconstruction is not fitted yet may change --reconstruction-fit, so a finished run can
@@ -87,11 +88,11 @@ pub struct TrainOptions {
     /// preset's active set, `active_set.from_scale`; see docs/training.md).
     #[arg(long)]
     pub dense: bool,
-    /// Weight of the colour-distribution loss of generated scenes at the 3D scales (sliced W2
-    /// between the pixel colours of a sample's rendering and the real view's; default: the
-    /// preset's).
-    #[arg(long, value_name = "W")]
-    pub lambda_colour: Option<f64>,
+    /// Weight of the colour-distribution loss of generated scenes at the 3D scales,
+    /// `losses.colour_distribution` (sliced W2 between the pixel colours of a sample's rendering
+    /// and the real view's; default: the preset's). `--lambda-colour` before 2026-12-06.
+    #[arg(long, value_name = "W", alias = "lambda-colour")]
+    pub lambda_colour_distribution: Option<f64>,
     /// Views of the reconstruction loss per generator step at the 3D scales (default: the
     /// preset's).
     #[arg(long, value_name = "N")]
@@ -107,16 +108,16 @@ pub struct TrainOptions {
     /// schedule).
     #[arg(long, value_name = "N")]
     pub iterations: Option<usize>,
-    /// Seed of every random draw.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// Seed of every random draw (default: the preset's, 0).
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Also compare every 3D scale's reconstruction in 3D with this directly fitted volume
     /// (from `volgen fit`; copied into the run) instead of fitting one.
     #[arg(long, value_name = "VOLUME", conflicts_with = "fit")]
     pub fitted: Option<PathBuf>,
     /// Fit a volume to the dataset first (`volgen fit` at twice the finest 3D scale's edge, or
-    /// at that edge for post-activated runs; written to RUN/fitted.safetensors) and train
-    /// against it as --fitted does. A configuration that compares with a fitted volume (`--set
+    /// at that edge for post-activated runs; kept in the run) and train against it as
+    /// --fitted does. A configuration that compares with a fitted volume (`--set
     /// losses.fitted=W`) does this without the flag.
     #[arg(long)]
     pub fit: bool,
@@ -141,15 +142,25 @@ pub struct TrainOptions {
     /// preset's). Generated scenes are not changed by it.
     #[arg(long, value_name = "K")]
     pub reconstruction_fit: Option<usize>,
-    /// Set any setting of the configuration, by its dotted path in config.json, to a JSON
-    /// value, after the preset and the flags above: `--set losses.rgb=50 --set
-    /// pyramid.channels=32`. Repeatable.
+    /// Set any setting of the configuration, by its dotted path in the run's configuration, to
+    /// a JSON value, after the preset and the flags above: `--set losses.rgb=50 --set
+    /// pyramid.channels=32`. Repeatable; a setting a flag above gives is refused.
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub settings: Vec<String>,
     /// Keep every N-th view (0, N, 2N, ...) out of training; `volgen eval` reports the
     /// reconstruction on them separately (fit against 3D consistency). Recorded in the run.
     #[arg(long, value_name = "N")]
     pub holdout: Option<usize>,
+}
+
+/// `--preset`'s values, each with what it is for (`--help` lists them).
+fn presets() -> clap::builder::PossibleValuesParser {
+    TrainConfig::PRESETS
+        .map(|name| {
+            let about = TrainConfig::preset_about(name).unwrap_or_default();
+            clap::builder::PossibleValue::new(name).help(about)
+        })
+        .into()
 }
 
 /// The fitted-volume weight `--fitted` and `--fit` use on a configuration without one, unless told
@@ -159,197 +170,202 @@ pub const DEFAULT_LAMBDA_FITTED: f64 = 10.0;
 impl TrainOptions {
     /// The configuration these options describe.
     pub fn config(&self) -> Result<TrainConfig> {
-        let mut config = TrainConfig::preset(&self.preset)?;
+        self.flags()?.set(&self.settings)
+    }
+
+    /// The preset changed by the flags, each naming the settings it changes (`--set` comes
+    /// after).
+    pub fn flags(&self) -> Result<Settings> {
+        let mut s = Settings::new(TrainConfig::preset(&self.preset)?);
         if let Some(scales) = self.scales {
-            config = config.with_scales(scales)?;
+            let paths = &[
+                "pyramid.volume_sizes",
+                "pyramid.image_sizes",
+                "pyramid.samples",
+                "schedule.scales",
+                "schedule.scale_views",
+            ];
+            s.flag("--scales", paths, |c| {
+                *c = c.clone().with_scales(scales)?;
+                Ok(())
+            })?;
         }
         if let Some(iterations) = self.iterations {
-            config = config.with_iterations(iterations);
+            s.flag("--iterations", &["schedule.scales"], |c| {
+                *c = c.clone().with_iterations(iterations);
+                Ok(())
+            })?;
         }
-        config.ablations.use_swd &= !self.no_swd;
+        if self.no_swd {
+            s.flag("--no-swd", &["ablations.use_swd"], |c| {
+                c.ablations.use_swd = false;
+                Ok(())
+            })?;
+        }
         if self.vgg19.is_some() {
-            config.losses.swd_features = SwdFeatures::Vgg19;
+            s.flag("--vgg19", &["losses.swd_features"], |c| {
+                c.losses.swd_features = SwdFeatures::Vgg19;
+                Ok(())
+            })?;
         }
-        config.ablations.use_csg &= !self.no_csg;
-        config.ablations.use_depth &= !self.no_depth;
+        if self.no_csg {
+            s.flag("--no-csg", &["ablations.use_csg"], |c| {
+                c.ablations.use_csg = false;
+                Ok(())
+            })?;
+        }
+        if self.no_depth {
+            s.flag("--no-depth", &["ablations.use_depth"], |c| {
+                c.ablations.use_depth = false;
+                Ok(())
+            })?;
+        }
         if let Some(views) = self.reconstruction_views {
-            config = config.with_reconstruction_views(views);
+            s.flag("--reconstruction-views", &["schedule.scale_views"], |c| {
+                *c = c.clone().with_reconstruction_views(views);
+                Ok(())
+            })?;
         }
         if self.dense {
-            config.active_set.from_scale = None;
+            s.flag("--dense", &["active_set.from_scale"], |c| {
+                c.active_set.from_scale = None;
+                Ok(())
+            })?;
         }
-        if let Some(weight) = self.lambda_colour {
-            config.losses.colour_distribution = weight;
+        if let Some(weight) = self.lambda_colour_distribution {
+            let paths = &["losses.colour_distribution"];
+            s.flag("--lambda-colour-distribution", paths, |c| {
+                c.losses.colour_distribution = weight;
+                Ok(())
+            })?;
         }
         if let Some(layers) = self.layers {
-            config.pyramid.layers = layers;
+            s.flag("--layers", &["pyramid.layers"], |c| {
+                c.pyramid.layers = layers;
+                Ok(())
+            })?;
         }
         if let Some(rate) = self.learning_rate {
-            config.schedule.learning_rate = rate;
+            s.flag("--learning-rate", &["schedule.learning_rate"], |c| {
+                c.schedule.learning_rate = rate;
+                Ok(())
+            })?;
         }
         if self.no_opacity {
-            config.losses.opacity = 0.0;
-            config.critics.opacity = false;
-            config.losses.height_profile = 0.0;
-            config.losses.opacity_binary = 0.0;
+            let paths = &[
+                "losses.opacity",
+                "critics.opacity",
+                "losses.height_profile",
+                "losses.opacity_binary",
+            ];
+            s.flag("--no-opacity", paths, |c| {
+                c.losses.opacity = 0.0;
+                c.critics.opacity = false;
+                c.losses.height_profile = 0.0;
+                c.losses.opacity_binary = 0.0;
+                Ok(())
+            })?;
         }
-        config.run.seed = self.seed;
+        if let Some(seed) = self.seed {
+            s.flag("--seed", &["run.seed"], |c| {
+                c.run.seed = seed;
+                Ok(())
+            })?;
+        }
         if let Some(weight) = self.lambda_fitted {
-            config.losses.fitted = weight;
-        } else if (self.fitted.is_some() || self.fit) && config.losses.fitted == 0.0 {
-            config.losses.fitted = DEFAULT_LAMBDA_FITTED;
+            s.flag("--lambda-fitted", &["losses.fitted"], |c| {
+                c.losses.fitted = weight;
+                Ok(())
+            })?;
+        } else if self.fitted.is_some() || self.fit {
+            // Only a default weight, which `--set losses.fitted` may give instead.
+            s.flag("--fit / --fitted", &[], |c| {
+                if c.losses.fitted == 0.0 {
+                    c.losses.fitted = DEFAULT_LAMBDA_FITTED;
+                }
+                Ok(())
+            })?;
         }
         if let Some(weight) = self.lambda_volume_critic {
-            config.losses.volume_critic = weight;
-        }
-        config.critics.volume_colour |= self.volume_critic_colour;
-        if let Some(steps) = self.reconstruction_fit {
-            config.schedule.reconstruction_fit_steps = steps;
-        }
-        config.run.holdout = self.holdout;
-        for setting in &self.settings {
-            let (field, value) = setting.split_once('=').with_context(|| {
-                format!("--set {setting}: expected PATH=VALUE, e.g. --set losses.rgb=50")
+            s.flag("--lambda-volume-critic", &["losses.volume_critic"], |c| {
+                c.losses.volume_critic = weight;
+                Ok(())
             })?;
-            config = config
-                .with_setting(field.trim(), value.trim())
-                .with_context(|| format!("--set {setting}"))?;
         }
-        config.validate()?;
-        Ok(config)
+        if self.volume_critic_colour {
+            s.flag("--volume-critic-colour", &["critics.volume_colour"], |c| {
+                c.critics.volume_colour = true;
+                Ok(())
+            })?;
+        }
+        if let Some(steps) = self.reconstruction_fit {
+            let paths = &["schedule.reconstruction_fit_steps"];
+            s.flag("--reconstruction-fit", paths, |c| {
+                c.schedule.reconstruction_fit_steps = steps;
+                Ok(())
+            })?;
+        }
+        if let Some(every) = self.holdout {
+            s.flag("--holdout", &["run.holdout"], |c| {
+                c.run.holdout = Some(every);
+                Ok(())
+            })?;
+        }
+        Ok(s)
     }
 
-    /// How the run goes beside its configuration: resume or not, the VGG-19 weights.
-    /// With `--fit`, or a configuration that compares with a fitted volume and no `--fitted`,
-    /// runs the fit into `run_dir` (unless resuming a run that has its copy).
-    pub fn run_options(
-        &self,
-        config: &TrainConfig,
-        dataset: &Dataset,
-        run_dir: &Path,
-    ) -> Result<RunOptions> {
-        let needs_fit = config.losses.fitted > 0.0 || config.losses.volume_critic > 0.0;
-        let fitted_volume = match (&self.fitted, self.fit || needs_fit) {
-            (Some(path), _) => Some(path.clone()),
-            (None, true) => Some(fit_for_training(
-                config,
-                self.fit_steps,
-                dataset,
-                run_dir,
-                self.resume,
-            )?),
-            (None, false) => None,
-        };
-        Ok(RunOptions {
+    /// How the run goes beside its configuration: resume or not, the VGG-19 weights, a fitted
+    /// volume given and the steps of the fit made otherwise.
+    pub fn run_options(&self) -> RunOptions {
+        RunOptions {
             resume: self.resume,
             vgg19_weights: self.vgg19.clone(),
-            fitted_volume,
+            fitted_volume: self.fitted.clone(),
+            fit_steps: self.fit_steps,
             ..RunOptions::default()
-        })
-    }
-}
-
-/// Fits `dataset`'s training views into `run_dir/fitted.safetensors` as
-/// [`TrainConfig::fit_config`] says (with a progress bar), or reuses the file
-/// there when resuming.
-fn fit_for_training(
-    config: &TrainConfig,
-    steps: Option<usize>,
-    dataset: &Dataset,
-    run_dir: &Path,
-    resume: bool,
-) -> Result<PathBuf> {
-    let path = run_dir.join("fitted.safetensors");
-    if resume && path.exists() {
-        return Ok(path);
-    }
-    let size = config.fit_config().size;
-    let fitted = super::fit::with_fit_progress(dataset, |observer| {
-        Ok(singrav::train::fit_training_target(
-            config, dataset, steps, observer,
-        )?)
-    })?;
-    std::fs::create_dir_all(run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
-    fitted.volume.save_safetensors(&path)?;
-    eprintln!(
-        "fitted {size}^3 to the dataset in {:.1} s: {}",
-        fitted.seconds,
-        path.display()
-    );
-    Ok(path)
-}
-
-/// `dataset` with depth from a fit of its training views without depth
-/// ([`Dataset::with_depth_from`]): the fit is written to `RUN/depth_fit.safetensors`, or read
-/// from there when resuming.
-fn with_depth_from_fit(
-    config: &TrainConfig,
-    dataset: Dataset,
-    args: &TrainArgs,
-) -> Result<Dataset> {
-    let run_dir = &args.out;
-    let path = run_dir.join("depth_fit.safetensors");
-    let volume = if args.options.resume && path.exists() {
-        RadianceVolume::load_safetensors(&path)?
-    } else {
-        let defaults = FitConfig::default();
-        let mut fit_config = FitConfig {
-            use_depth: false,
-            budget: args
-                .depth_fit_steps
-                .map_or(defaults.budget, volume_fit::FitBudget::Steps),
-            ..defaults
-        };
-        if let Some(bounds) = &config.run.bounds {
-            fit_config.aabb = bounds.cube();
         }
-        let training = match config.run.holdout {
-            Some(every) => dataset.holdout_split(every)?.0,
-            None => (0..dataset.len()).collect(),
-        };
-        let fitted = super::fit::with_fit_progress(&dataset, |observer| {
-            Ok(volume_fit::fit_volume(
-                &dataset,
-                &training,
-                &fit_config,
-                observer,
-            )?)
-        })?;
-        std::fs::create_dir_all(run_dir)
-            .with_context(|| format!("creating {}", run_dir.display()))?;
-        fitted.volume.save_safetensors(&path)?;
-        eprintln!(
-            "fitted {}^3 to the views without depth in {:.1} s for their depth: {}",
-            fit_config.size,
-            fitted.seconds,
-            path.display()
-        );
-        fitted.volume
-    };
-    let (dataset, coverage) = dataset.with_depth_from(&volume)?;
-    eprintln!(
-        "depth from the fit: {} of {} foreground pixels ({:.1}%) are too thin in it and left \
-         out of the depth loss",
-        coverage.holes,
-        coverage.foreground,
-        100.0 * coverage.holes as f64 / coverage.foreground.max(1) as f64
-    );
-    Ok(dataset)
+    }
 }
 
 /// Trains as the arguments say.
 pub fn run(args: &TrainArgs) -> Result<()> {
-    let mut config = args.options.config()?;
-    config.run.depth_from_fit = args.depth_from_fit;
-    let mut dataset = load_dataset(&args.dataset, &config, args.depth_kind)?;
-    config.run.bounds = scene_bounds(args.bounds.as_deref(), &dataset)?;
-    if args.depth_from_fit {
-        dataset = with_depth_from_fit(&config, dataset, args)?;
+    let mut flags = args.options.flags()?;
+    if args.bounds.is_some() {
+        // Resolved on the dataset below.
+        flags.flag("--bounds", &["run.bounds"], |_| Ok(()))?;
     }
-    // Without depth maps the depth loss and the critics' depth channel have nothing to see.
-    config.ablations.use_depth &= dataset.depth_kind() != DepthKind::None;
-    let options = args.options.run_options(&config, &dataset, &args.out)?;
-    if options.resume && args.out.is_dir() && !args.out.join(CHECKPOINT_FILE).exists() {
+    if args.depth_from_fit {
+        flags.flag("--depth-from-fit", &["run.depth_from_fit"], |c| {
+            c.run.depth_from_fit = true;
+            Ok(())
+        })?;
+    }
+    let mut config = flags.set(&args.options.settings)?;
+    let auto = args.bounds == Some(Bounds::Auto);
+    let depth_kind = if config.reads_depth_maps() || auto {
+        args.depth_kind
+    } else {
+        // Nothing reads the depth maps: their kind need not be known.
+        Some(DepthKind::None)
+    };
+    let dataset = load_dataset(&args.dataset, &config, depth_kind)?;
+    match &args.bounds {
+        Some(bounds) => config.run.bounds = Some(scene_bounds(bounds, &dataset)?),
+        None if config.run.bounds.is_none() => warn_if_beyond_the_cube(&dataset),
+        None => {}
+    }
+    if config.reads_depth_maps()
+        && dataset.depth_kind() == DepthKind::None
+        && !names_setting(&args.options.settings, "ablations.use_depth")
+    {
+        // Without depth maps the depth loss and the critics' depth channel have nothing to see.
+        config.ablations.use_depth = false;
+    }
+    let options = RunOptions {
+        depth_fit_steps: args.depth_fit_steps,
+        ..args.options.run_options()
+    };
+    if options.resume && args.out.is_dir() && !RunDir::new(&args.out).has_checkpoint() {
         eprintln!(
             "{} holds no checkpoint yet: training from the beginning",
             args.out.display()
@@ -360,45 +376,24 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
-/// The scene's box as `--bounds` gives it (printed), or `None` without the flag (with a warning
-/// when the depth shows a scene outside the model's cube).
-pub fn scene_bounds(flag: Option<&str>, dataset: &Dataset) -> Result<Option<SceneBounds>> {
-    let Some(flag) = flag else {
-        warn_if_outside_the_cube(dataset);
-        return Ok(None);
-    };
-    let bounds = match flag {
-        "auto" => dataset.auto_bounds()?,
-        given => given
-            .parse::<SceneBounds>()
-            .context("--bounds: expected xmin,ymin,zmin,xmax,ymax,zmax or auto")?,
-    };
-    let cube = bounds.cube();
+/// The scene's box `bounds` gives for `dataset`, printed with where the model's cube lies.
+pub fn scene_bounds(bounds: &Bounds, dataset: &Dataset) -> Result<SceneBounds> {
+    let scene = bounds.resolve(dataset)?;
+    let cube = scene.cube();
     println!(
-        "scene bounds {bounds} (--bounds {flag}); the model's cube [-1, 1]^3 is {:?}..{:?} in \
+        "scene bounds {scene} (--bounds {bounds}); the model's cube [-1, 1]^3 is {:?}..{:?} in \
          the scene",
         cube.min.to_array(),
         cube.max.to_array()
     );
-    Ok(Some(bounds))
+    Ok(scene)
 }
 
-/// How far past the model's cube `[-1, 1]^3` the depth maps' `auto` box may reach before
-/// training without `--bounds` warns (the box has a 5% margin; the built-in scenes' reach 1.09).
-const CUBE_SLACK: f32 = 1.25;
-
-/// Warns when the scene the depth maps show is not in the model's cube: trained without
-/// `--bounds`, it would be cut off or squeezed.
-fn warn_if_outside_the_cube(dataset: &Dataset) {
-    let Ok(seen) = dataset.auto_bounds() else {
-        return;
-    };
-    if seen
-        .min
-        .iter()
-        .chain(&seen.max)
-        .any(|v| v.abs() > CUBE_SLACK)
-    {
+/// Warns when the scene the depth maps show is not in the model's cube
+/// ([`singrav::train::beyond_the_cube`]): trained without bounds, it would be cut off or
+/// squeezed.
+pub fn warn_if_beyond_the_cube(dataset: &Dataset) {
+    if let Some(seen) = singrav::train::beyond_the_cube(dataset) {
         eprintln!(
             "warning: the depth maps' points span {seen}, beyond the model's cube [-1, 1]^3; \
              give --bounds auto (or the scene's box) to place the scene"
@@ -407,7 +402,8 @@ fn warn_if_outside_the_cube(dataset: &Dataset) {
 }
 
 /// Loads and checks a dataset for training with `config`, its depth read as `depth_kind` when
-/// given (else as the dataset says), and reports the pixels left out of the depth loss.
+/// given (else as the dataset says; [`DepthKind::None`]: not read), and reports the pixels left
+/// out of the depth loss.
 pub fn load_dataset(
     path: &Path,
     config: &TrainConfig,
@@ -420,7 +416,9 @@ pub fn load_dataset(
     let dataset = Dataset::load_with(path, &options)
         .with_context(|| format!("loading the dataset {}", path.display()))?;
     let left_out = dataset.depth_left_out();
-    if dataset.depth_kind() == DepthKind::None {
+    if depth_kind == Some(DepthKind::None) {
+        // Not asked for: nothing to report.
+    } else if dataset.depth_kind() == DepthKind::None {
         eprintln!(
             "{}: no depth maps (depth_kind none): training and fitting go without the depth loss",
             path.display()
@@ -436,13 +434,40 @@ pub fn load_dataset(
     Ok(dataset)
 }
 
-/// Trains with a progress bar (scale, step, losses, time left) and a line per scale.
+/// Trains with a progress bar (scale, step, losses, time left) and a line per scale, after the
+/// fits the run needs first ([`prepare`]), each with a bar of its own and a line.
 pub fn train_with_progress(
     config: &TrainConfig,
     dataset: &Dataset,
     run_dir: &Path,
     options: &RunOptions,
 ) -> Result<Box<SinGrav>> {
+    let device = device()?;
+    let run = RunDir::new(run_dir);
+    let fit_bar = FitBar::new()?;
+    let inputs = prepare(config, dataset, &run, options, &device, &mut |fit, p| {
+        fit_bar.show(fit_name(fit), p);
+    })
+    .with_context(|| format!("training into {}", run_dir.display()))?;
+    fit_bar.finish();
+    for made in &inputs.made {
+        eprintln!(
+            "fitted {}^3 to {} in {:.1} s: {}",
+            made.size,
+            fit_name(made.fit),
+            made.seconds,
+            made.path.display()
+        );
+    }
+    if let Some(coverage) = &inputs.depth_coverage {
+        eprintln!(
+            "depth from the fit: {} of {} foreground pixels ({:.1}%) are too thin in it and left \
+             out of the depth loss",
+            coverage.holes,
+            coverage.foreground,
+            100.0 * coverage.holes as f64 / coverage.foreground.max(1) as f64
+        );
+    }
     let total = config.total_iterations() as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
     bar.set_style(
@@ -488,12 +513,21 @@ pub fn train_with_progress(
         }
         Control::Continue
     };
-    let outcome = train(config, dataset, run_dir, options, &device()?, &mut observer)
+    let outcome = Trainer::from_inputs(config, inputs, run_dir, &device)
+        .and_then(|trainer| trainer.run(&mut observer))
         .with_context(|| format!("training into {}", run_dir.display()))?;
     bar.finish_and_clear();
     match outcome {
         TrainOutcome::Finished(model) => Ok(model),
-        TrainOutcome::Stopped => anyhow::bail!("training stopped before the last scale"),
+        TrainOutcome::Stopped => bail!("training stopped before the last scale"),
+    }
+}
+
+/// What a fit a run makes is of, in messages.
+fn fit_name(fit: RunFit) -> &'static str {
+    match fit {
+        RunFit::DepthSource => "the views without depth for their depth",
+        _ => "the dataset",
     }
 }
 
@@ -516,38 +550,19 @@ pub fn device() -> Result<candle_core::Device> {
     Ok(candle_core::Device::Cpu)
 }
 
-/// The losses of a step, compactly: the colour reconstruction first, then every other term
-/// computed.
+/// The losses of a step, compactly, by their short names: the RGB reconstruction first, then
+/// every other term computed.
 fn format_losses(l: &StepLosses) -> String {
+    let first = LossTerm::Rgb;
     let mut parts = vec![format!(
-        "rec {:.4}",
-        l.get(LossTerm::Colour).unwrap_or_default()
+        "{} {:.4}",
+        first.short_name(),
+        l.get(first).unwrap_or_default()
     )];
-    for (term, value) in l.iter().filter(|(term, _)| *term != LossTerm::Colour) {
-        parts.push(format!("{} {value:.3}", short_name(term)));
+    for (term, value) in l.iter().filter(|(term, _)| *term != first) {
+        parts.push(format!("{} {value:.3}", term.short_name()));
     }
     parts.join(" ")
-}
-
-/// A loss term's name on the progress bar.
-fn short_name(term: LossTerm) -> &'static str {
-    match term {
-        LossTerm::Critic => "D",
-        LossTerm::Penalty => "gp",
-        LossTerm::Adversarial => "adv",
-        LossTerm::Colour => "rec",
-        LossTerm::Depth => "depth",
-        LossTerm::Swd => "swd",
-        LossTerm::Fitted => "fit",
-        LossTerm::Opacity => "opacity",
-        LossTerm::ColourDistribution => "colour",
-        LossTerm::ChromaDistribution => "chroma",
-        LossTerm::HeightProfile => "height",
-        LossTerm::OpacityBinary => "binary",
-        LossTerm::VolumeCritic => "D3",
-        LossTerm::VolumePenalty => "gp3",
-        LossTerm::VolumeAdversarial => "adv3",
-    }
 }
 
 #[cfg(test)]
@@ -555,7 +570,7 @@ mod tests {
     use clap::Parser;
     use singrav::TrainConfig;
 
-    use super::TrainOptions;
+    use super::{Settings, TrainOptions};
 
     /// `train`'s options alone, as the command line parses them.
     #[derive(clap::Parser)]
@@ -598,6 +613,55 @@ mod tests {
         assert_eq!(given.schedule.reconstruction_fit_steps, 500);
         let off = config(&["--preset", "tiny", "--reconstruction-fit", "0"]);
         assert_eq!(off.schedule.reconstruction_fit_steps, 0);
+    }
+
+    /// `train`'s options as given, before `--set`.
+    fn flags(args: &[&str]) -> Settings {
+        let parsed = Options::try_parse_from(std::iter::once("train").chain(args.iter().copied()));
+        parsed.unwrap().options.flags().unwrap()
+    }
+
+    #[test]
+    fn a_set_of_what_a_flag_gives_is_an_error_naming_both() {
+        for (flag, setting) in [
+            ("--lambda-colour-distribution", "losses.colour_distribution=3"),
+            ("--lambda-colour", "losses.colour_distribution=3"),
+            ("--seed", "run.seed=3"),
+            ("--holdout", "run={}"),
+            ("--layers", "pyramid.layers=4"),
+        ] {
+            let parsed = Options::try_parse_from(["train", flag, "4", "--set", setting]);
+            let err = parsed.unwrap().options.config().unwrap_err().to_string();
+            let named = if flag == "--lambda-colour" {
+                "--lambda-colour-distribution"
+            } else {
+                flag
+            };
+            assert!(err.contains(named) && err.contains(setting), "{err}");
+        }
+        // A flag that only supplies a default leaves the setting to `--set`.
+        let set = config(&["--fit", "--set", "losses.fitted=2"]);
+        assert_eq!(set.losses.fitted, 2.0);
+    }
+
+    /// Every flag names each setting it changes, so what `--set` may change is known.
+    #[test]
+    fn every_flag_changes_only_the_settings_it_names() {
+        let given = flags(&[
+            "--preset", "small", "--scales", "3", "--no-swd", "--no-csg", "--no-depth",
+            "--no-opacity", "--dense", "--lambda-colour-distribution", "7",
+            "--reconstruction-views", "3", "--layers", "4", "--learning-rate", "0.01",
+            "--iterations", "9", "--seed", "5", "--lambda-fitted", "2",
+            "--lambda-volume-critic", "0.7", "--volume-critic-colour",
+            "--reconstruction-fit", "11", "--holdout", "3",
+        ]);
+        let preset = TrainConfig::preset("small").unwrap();
+        let changed = singrav::config::settings_that_differ(&preset, given.config());
+        assert!(changed.len() >= 20, "{changed:?}");
+        for change in changed {
+            let path = change.split(' ').next().unwrap();
+            assert!(given.flag_of(path).is_some(), "{path} changed by no flag");
+        }
     }
 
     #[test]

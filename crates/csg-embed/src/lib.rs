@@ -31,3 +31,13 @@ pub use error::{Error, Result};
 pub use extended::{csg_grid_3d_over, Outside};
 pub use fourier::{fourier_channels, fourier_features, octave_frequencies};
 pub use grid::{csg_coordinate, csg_grid_2d, csg_grid_3d, csg_grid_3d_batched};
+
+/// The types most users of this crate need, for `use csg_embed::prelude::*;`.
+pub mod prelude {
+    pub use crate::{csg_grid_2d, csg_grid_3d, fourier_features, octave_frequencies, Outside};
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

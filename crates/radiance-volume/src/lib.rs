@@ -26,8 +26,6 @@
 //! assert!(occupancy.occupied_fraction() < 1.0);
 //! # Ok::<(), radiance_volume::Error>(())
 //! ```
-#![warn(missing_docs)]
-#![forbid(unsafe_code)]
 
 mod activation;
 mod edit;
@@ -55,3 +53,8 @@ pub mod prelude {
         Aabb, Activation, GridDims, OccupancyGrid, RadianceVolume, VoxelGrid, VoxelRange,
     };
 }
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

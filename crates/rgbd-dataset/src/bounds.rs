@@ -132,6 +132,59 @@ impl std::str::FromStr for SceneBounds {
     }
 }
 
+/// Where a scene is, as a user says it: its box, or `auto`, the box its depth maps (or sparse
+/// points) show ([`Dataset::auto_bounds`]).
+///
+/// ```
+/// use rgbd_dataset::{Bounds, SceneBounds};
+/// assert_eq!("auto".parse::<Bounds>()?, Bounds::Auto);
+/// let given: Bounds = "0,0,0,4,2,2".parse()?;
+/// assert_eq!(given, Bounds::Box("0,0,0,4,2,2".parse::<SceneBounds>()?));
+/// assert!("0,0,0,1,1".parse::<Bounds>().unwrap_err().to_string().contains("or auto"));
+/// # Ok::<(), rgbd_dataset::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Bounds {
+    /// This box.
+    Box(SceneBounds),
+    /// The box the dataset shows.
+    Auto,
+}
+
+impl Bounds {
+    /// The box itself, or `auto`'s for `dataset`.
+    pub fn resolve(&self, dataset: &Dataset) -> Result<SceneBounds> {
+        match self {
+            Self::Box(bounds) => Ok(*bounds),
+            Self::Auto => dataset.auto_bounds(),
+        }
+    }
+}
+
+impl std::fmt::Display for Bounds {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Box(bounds) => bounds.fmt(f),
+            Self::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+impl std::str::FromStr for Bounds {
+    type Err = crate::Error;
+
+    /// Parses `auto` or `xmin,ymin,zmin,xmax,ymax,zmax`.
+    fn from_str(s: &str) -> Result<Self> {
+        if s.trim() == "auto" {
+            return Ok(Self::Auto);
+        }
+        s.parse().map(Self::Box).map_err(|e| match e {
+            crate::Error::Invalid { what, why } => invalid(what, format!("{why}, or auto")),
+            other => other,
+        })
+    }
+}
+
 /// Whether `camera` sees `p`: in front of it and inside its image.
 fn sees(camera: &Camera, p: Vec3) -> bool {
     let q = camera.c2w.inverse().transform_point3(p);

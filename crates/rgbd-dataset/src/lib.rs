@@ -120,7 +120,7 @@ pub mod scenes;
 mod source;
 mod write;
 
-pub use bounds::SceneBounds;
+pub use bounds::{Bounds, SceneBounds};
 pub use depth::DepthKind;
 pub use error::{Error, Result};
 pub use rendered::{DepthCoverage, MIN_COVERED_SHARE};
@@ -470,3 +470,14 @@ fn transforms_file(path: &Path) -> PathBuf {
         path.to_path_buf()
     }
 }
+
+/// The types most users of this crate need, for `use rgbd_dataset::prelude::*;`.
+pub mod prelude {
+    pub use crate::scenes::{Scene, SceneKind};
+    pub use crate::{write_dataset, Bounds, Dataset, DatasetSpec, DepthKind, LoadOptions, SceneBounds};
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -147,7 +147,7 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         names.push(at.name);
     }
     let (width, height) = size.unwrap_or_default();
-    let mut cameras: Vec<Camera> = volrender::load_transforms(&path, Some((width, height)))?
+    let mut cameras: Vec<Camera> = volrender::transforms_from_json(&root, &path, Some((width, height)))?
         .into_iter()
         .map(|frame| frame.camera)
         .collect();

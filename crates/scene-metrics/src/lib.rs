@@ -99,3 +99,16 @@ fn check_scenes(
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
 }
+
+/// The types most users of this crate need, for `use scene_metrics::prelude::*;`.
+pub mod prelude {
+    pub use crate::{
+        colour_swd, diversity_mv, floaters, mean_psnr, mean_ssim, patch_swd_mv, sifid_mv, Estimate,
+        InceptionBlock1,
+    };
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -3,7 +3,7 @@
 //! killed run always leaves the last complete checkpoint behind.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use candle_core::{Device, Tensor};
 use safetensors::tensor::{Dtype, TensorView};
@@ -11,11 +11,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::TrainConfig;
 use crate::error::{Error, Result};
-
-/// The checkpoint's file name inside a run directory.
-pub const CHECKPOINT_FILE: &str = "checkpoint.safetensors";
-/// A human-readable copy of the configuration inside a run directory.
-pub const CONFIG_FILE: &str = "config.json";
 
 /// Where training stands.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -55,18 +50,9 @@ pub struct Checkpoint {
     /// Where it stands.
     pub state: TrainState,
     /// Weights (`g{n}.*`, `up.*`, `d.*`), `z_star` (and the optimised `z_star.{n}` of runs with
-    /// `reconstruction_noise_lr > 0`), optimiser moments (`opt_g.*`, `opt_d.*`, `opt_z.*`), and
+    /// `noise.reconstruction_lr > 0`), optimiser moments (`opt_g.*`, `opt_d.*`, `opt_z.*`), and
     /// V*'s `reconstruction_detail` once a run with `reconstruction_fit_steps > 0` has fitted it.
     pub tensors: HashMap<String, Tensor>,
-}
-
-/// The checkpoint file of `model`: the path itself if it is a file, else `model/checkpoint.safetensors`.
-pub fn checkpoint_path(model: &Path) -> PathBuf {
-    if model.is_dir() {
-        model.join(CHECKPOINT_FILE)
-    } else {
-        model.to_path_buf()
-    }
 }
 
 fn checkpoint_error(path: &Path, why: impl Into<String>) -> Error {

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 /// Errors of dataset loading, training, checkpoints, sampling and metrics.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A file could not be read or written.
     #[error("{path}: {source}")]

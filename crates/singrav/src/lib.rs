@@ -11,7 +11,7 @@
 //! - [`eval::evaluate`]: every quality number of a trained model against its dataset.
 //! - [`runtime::init`]: the process-wide settings that make training fast; call it first.
 //! - [`sample`]: new scenes from a trained model; [`applications`]: editing, harmonisation and
-//!   animation.
+//!   animation; [`RunDir`]: the files of a training run.
 //!
 //! ```no_run
 //! use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
@@ -25,7 +25,7 @@
 //! let device = candle_core::Device::Cpu;
 //! let outcome = train(&config, &data, "runs/stones".as_ref(), &RunOptions::default(), &device, &mut |_| Control::Continue)?;
 //! if let TrainOutcome::Finished(model) = outcome {
-//!     let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+//!     let cameras = model.showcase_cameras(3)?;
 //!     let scene = model.sample(&mut rand::rng(), &cameras)?;
 //!     // Physical density per voxel, 3x finer: other tools then render `tiny`'s
 //!     // post-activated edges as volgen does (`scene.volume` is the model's own grid).
@@ -48,6 +48,7 @@ pub mod noise;
 pub mod optim;
 pub mod picture;
 pub mod render;
+mod run_dir;
 pub mod runtime;
 pub mod sample;
 pub mod train;
@@ -55,3 +56,15 @@ pub mod train;
 pub use config::{ScaleSchedule, ScaleViews, SwdFeatures, TrainConfig};
 pub use error::{Error, Result};
 pub use model::SinGrav;
+pub use run_dir::RunDir;
+
+/// The types most users of this crate need, for `use singrav::prelude::*;`.
+pub mod prelude {
+    pub use crate::train::{train, RunOptions, Trainer};
+    pub use crate::{RunDir, SinGrav, TrainConfig};
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -11,12 +11,12 @@ use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rgbd_dataset::scenes::StandingStones;
 use rgbd_dataset::{write_dataset, Dataset, DatasetSpec};
-use singrav::checkpoint::{Checkpoint, CHECKPOINT_FILE};
+use singrav::checkpoint::Checkpoint;
 use singrav::model::RECONSTRUCTION_DETAIL_TENSOR;
 use singrav::train::{
     train, Control, Event, LossTerm, Progress, RunOptions, StepLosses, TrainOutcome,
 };
-use singrav::{Error, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
+use singrav::{Error, RunDir, ScaleSchedule, SinGrav, SwdFeatures, TrainConfig};
 use volume_fit::fit_volume;
 
 /// A small dataset of the stones scene at the micro preset's final resolution.
@@ -72,7 +72,7 @@ fn run_with(
 }
 
 fn checkpoint_tensors(dir: &Path) -> HashMap<String, Tensor> {
-    Checkpoint::load(&dir.join(CHECKPOINT_FILE), &Device::Cpu)
+    Checkpoint::load(&RunDir::new(&dir).checkpoint(), &Device::Cpu)
         .unwrap()
         .tensors
 }
@@ -174,7 +174,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
             l.get(LossTerm::Critic),
             l.get(LossTerm::Penalty),
             l.get(LossTerm::Adversarial),
-            l.get(LossTerm::Colour),
+            l.get(LossTerm::Rgb),
             l.get(LossTerm::Depth),
             l.get(LossTerm::Swd),
             l.get(LossTerm::Opacity),
@@ -225,7 +225,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), steps.len());
 
-    let cams = singrav::sample::showcase_cameras(2, model.render_size()).unwrap();
+    let cams = model.showcase_cameras(2).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let sample = model.sample(&mut rng, &cams).unwrap();
     let size = config.pyramid.volume_sizes[1];
@@ -281,7 +281,7 @@ fn assert_reconstruction_falls(change: impl FnOnce(&mut TrainConfig)) {
     let colour: Vec<f32> = steps
         .iter()
         .filter(|(s, _)| *s == 1)
-        .map(|(_, l)| l.get(LossTerm::Colour).unwrap())
+        .map(|(_, l)| l.get(LossTerm::Rgb).unwrap())
         .collect();
     let depth: Vec<f32> = steps
         .iter()
@@ -390,7 +390,7 @@ fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
         &checkpoint_tensors(&tmp.path().join("held")),
         &checkpoint_tensors(&tmp.path().join("subset")),
     );
-    let recorded = Checkpoint::load(&tmp.path().join("held").join(CHECKPOINT_FILE), &Device::Cpu)
+    let recorded = Checkpoint::load(&RunDir::new(tmp.path().join("held")).checkpoint(), &Device::Cpu)
         .unwrap()
         .config;
     assert_eq!(recorded.run.holdout, Some(3));
@@ -423,7 +423,7 @@ fn killed_and_resumed_run_ends_with_the_uninterrupted_weights() {
     )
     .unwrap();
     assert!(matches!(outcome, TrainOutcome::Stopped));
-    let state = Checkpoint::load(&killed.join(CHECKPOINT_FILE), &Device::Cpu)
+    let state = Checkpoint::load(&RunDir::new(&killed).checkpoint(), &Device::Cpu)
         .unwrap()
         .state;
     assert_eq!((state.scale, state.iteration), (2, 2));
@@ -489,7 +489,7 @@ fn a_nan_stops_the_run_at_once_and_resume_continues_from_the_last_good_checkpoin
     );
     // Nothing of the bad iteration was saved: the checkpoint is the one after iteration 1,
     // every weight finite, and the log ends before the bad iteration.
-    let saved = Checkpoint::load(&run.join(CHECKPOINT_FILE), &Device::Cpu).unwrap();
+    let saved = Checkpoint::load(&RunDir::new(&run).checkpoint(), &Device::Cpu).unwrap();
     assert_eq!((saved.state.scale, saved.state.iteration), (2, 2));
     for (name, tensor) in &saved.tensors {
         let values: Vec<f32> = tensor.flatten_all().unwrap().to_vec1().unwrap();
@@ -537,7 +537,7 @@ fn resume_refuses_another_configuration_and_names_the_field() {
     });
     let err = train_error(&other, &data, &run, &resume());
     assert!(
-        err.contains("losses.depth") && err.contains(CHECKPOINT_FILE),
+        err.contains("losses.depth") && err.contains("checkpoint.safetensors"),
         "{err}"
     );
 
@@ -548,14 +548,14 @@ fn resume_refuses_another_configuration_and_names_the_field() {
 #[test]
 fn broken_checkpoint_is_a_clear_error() {
     let tmp = tempfile::tempdir().unwrap();
-    let path = tmp.path().join(CHECKPOINT_FILE);
+    let path = RunDir::new(tmp.path()).checkpoint();
     std::fs::write(&path, b"not a checkpoint").unwrap();
     let err = SinGrav::load(tmp.path(), &Device::Cpu)
         .err()
         .unwrap()
         .to_string();
     assert!(
-        err.contains(CHECKPOINT_FILE) && err.contains("safetensors"),
+        err.contains("checkpoint.safetensors") && err.contains("safetensors"),
         "{err}"
     );
 }
@@ -883,7 +883,7 @@ fn vgg19_features_drive_the_last_scales_swd_when_weights_are_given() {
             l.get(LossTerm::Critic),
             l.get(LossTerm::Penalty),
             l.get(LossTerm::Adversarial),
-            l.get(LossTerm::Colour),
+            l.get(LossTerm::Rgb),
             l.get(LossTerm::Swd),
         ];
         assert!(
@@ -1114,7 +1114,7 @@ fn optimised_reconstruction_noise_trains_is_saved_and_resumes() {
 
     let mut without_z2 = finished.clone();
     without_z2.remove("z_star.2");
-    let state = Checkpoint::load(&whole.join(CHECKPOINT_FILE), &Device::Cpu)
+    let state = Checkpoint::load(&RunDir::new(&whole).checkpoint(), &Device::Cpu)
         .unwrap()
         .state;
     let err = SinGrav::from_tensors(
@@ -1154,8 +1154,8 @@ fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen(
     let fitted_dir = tmp.path().join("fitted");
     std::fs::create_dir(&fitted_dir).unwrap();
     std::fs::copy(
-        plain_dir.join(CHECKPOINT_FILE),
-        fitted_dir.join(CHECKPOINT_FILE),
+        RunDir::new(&plain_dir).checkpoint(),
+        RunDir::new(&fitted_dir).checkpoint(),
     )
     .unwrap();
     let config = micro().with(|c| {

@@ -46,9 +46,6 @@
 //! # Ok::<(), swd_loss::Error>(())
 //! ```
 
-#![forbid(unsafe_code)]
-#![warn(missing_docs)]
-
 mod error;
 mod projections;
 mod quantile;
@@ -70,3 +67,8 @@ pub use texture::{
 pub mod prelude {
     pub use crate::{sliced_wasserstein, Metric, PatchPyramid, Projections, TextureLoss, Vgg19};
 }
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -50,9 +50,6 @@
 //! assert!(image.opacity[centre] > 0.99 && image.opacity[0] < 1e-6);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
-#![warn(missing_docs)]
-// `unsafe` only to call the AVX2+FMA build of the kernels after detecting both (kernel/tile.rs).
-#![deny(unsafe_code)]
 
 mod allocator;
 mod buffer_pool;
@@ -81,9 +78,14 @@ pub use image::{render_image, Image};
 pub use op::{render, render_batch, RenderOutput};
 pub use rays::Rays;
 pub use threads::join_global_pool;
-pub use transforms::{load_transforms, FrameCamera};
+pub use transforms::{load_transforms, transforms_from_json, FrameCamera};
 
 /// The types most users need, for `use volrender::prelude::*`.
 pub mod prelude {
     pub use crate::{render, render_image, Camera, Rays, RenderConfig, Sampler};
 }
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

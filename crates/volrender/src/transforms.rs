@@ -55,6 +55,28 @@ pub fn load_transforms(
         why,
     };
     let root: Value = serde_json::from_str(&text).map_err(|e| fail(format!("not JSON: {e}")))?;
+    transforms_from_json(&root, path, size)
+}
+
+/// [`load_transforms`] of a `transforms.json` already parsed (`root`), for a reader that needs
+/// the file's other fields too; `path` names the file in errors.
+///
+/// ```
+/// let root = serde_json::json!({"camera_angle_x": 0.6, "frames": [{"transform_matrix":
+///     [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]});
+/// let frames = volrender::transforms_from_json(&root, "transforms.json".as_ref(), Some((8, 8)))?;
+/// assert_eq!(frames[0].camera.width, 8);
+/// # Ok::<(), volrender::Error>(())
+/// ```
+pub fn transforms_from_json(
+    root: &Value,
+    path: &Path,
+    size: Option<(usize, usize)>,
+) -> Result<Vec<FrameCamera>> {
+    let fail = |why: String| Error::InvalidTransforms {
+        path: path.to_path_buf(),
+        why,
+    };
     let frames = root
         .get("frames")
         .and_then(Value::as_array)
@@ -63,7 +85,7 @@ pub fn load_transforms(
         .iter()
         .enumerate()
         .map(|(i, frame)| {
-            parse_frame(&root, frame, size).map_err(|why| fail(format!("frames[{i}]: {why}")))
+            parse_frame(root, frame, size).map_err(|why| fail(format!("frames[{i}]: {why}")))
         })
         .collect()
 }

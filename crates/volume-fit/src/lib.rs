@@ -520,3 +520,13 @@ pub fn view_psnr(
     let rendered = render_views(volume, &level.cameras, config)?;
     Ok(scene_metrics::psnr_per_view(&rendered, &level.images)?)
 }
+
+/// The types most users of this crate need, for `use volume_fit::prelude::*;`.
+pub mod prelude {
+    pub use crate::{fit_volume, FitBudget, FitConfig, FittedVolume};
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 /// What went wrong making or writing a mesh.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// An argument is out of its range; names the argument and what was expected.
     #[error("invalid argument `{what}`: {why}")]

@@ -33,3 +33,13 @@ pub use error::{Error, Result};
 pub use extract::{MeshOptions, DEFAULT_LEVEL};
 pub use mesh::Mesh;
 pub use write::{srgb_to_linear, MeshFormat};
+
+/// The types most users of this crate need, for `use volume_mesh::prelude::*;`.
+pub mod prelude {
+    pub use crate::{Mesh, MeshFormat, MeshOptions};
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

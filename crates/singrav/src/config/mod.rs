@@ -137,8 +137,9 @@ pub struct Schedule {
     pub reconstruction_pixels: Option<usize>,
 }
 
-/// The loss weights. 0 leaves a term out.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// The loss weights. 0 leaves a term out, and [`Default`] leaves every term out. Each weight
+/// weighs one [`LossTerm`](crate::train::LossTerm) ([`Losses::weights`]).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Losses {
     /// Colour reconstruction weight lambda_c (10 in the paper): `mse` between renderings of
@@ -184,6 +185,45 @@ pub struct Losses {
     /// [`Critics::volume_colour`] its opacity-weighted colour) against the fitted volume's (see
     /// `fitted`; it needs one too), with WGAN-GP steps of its own beside each 2D critic step.
     pub volume_critic: f64,
+}
+
+impl Losses {
+    /// Every weight with its dotted path (as `--set` takes it), in the order of the fields:
+    /// what validation checks. A new field is a compile error here until it is listed.
+    ///
+    /// ```
+    /// let tiny = singrav::TrainConfig::preset("tiny")?;
+    /// let weights = tiny.losses.weights();
+    /// assert!(weights.contains(&("losses.rgb", 50.0)));
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn weights(&self) -> Vec<(&'static str, f64)> {
+        let Self {
+            rgb,
+            depth,
+            opacity,
+            swd,
+            swd_features: _,
+            colour_distribution,
+            chroma_distribution,
+            height_profile,
+            opacity_binary,
+            fitted,
+            volume_critic,
+        } = *self;
+        vec![
+            ("losses.rgb", rgb),
+            ("losses.depth", depth),
+            ("losses.opacity", opacity),
+            ("losses.swd", swd),
+            ("losses.colour_distribution", colour_distribution),
+            ("losses.chroma_distribution", chroma_distribution),
+            ("losses.height_profile", height_profile),
+            ("losses.opacity_binary", opacity_binary),
+            ("losses.fitted", fitted),
+            ("losses.volume_critic", volume_critic),
+        ]
+    }
 }
 
 /// What the critics see, and their gradient penalty.
@@ -423,6 +463,59 @@ impl TrainConfig {
             use_depth: self.ablations.use_depth,
             seed: self.run.seed,
             post_activation,
+            aabb: self
+                .run
+                .bounds
+                .map_or(radiance_volume::Aabb::CUBE, |bounds| bounds.cube()),
+            ..volume_fit::FitConfig::default()
+        }
+    }
+
+    /// Whether a run compares with a volume fitted to its views ([`Losses::fitted`], the 3D
+    /// critic of [`Losses::volume_critic`]): it then fits one before its first scale
+    /// ([`TrainConfig::fit_config`]), unless given one.
+    ///
+    /// ```
+    /// let tiny = singrav::TrainConfig::preset("tiny")?;
+    /// assert!(tiny.compares_with_fit());
+    /// assert!(!singrav::TrainConfig::preset("micro")?.compares_with_fit());
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn compares_with_fit(&self) -> bool {
+        self.losses.fitted > 0.0 || self.losses.volume_critic > 0.0
+    }
+
+    /// Whether a run reads its dataset's depth maps: it supervises depth
+    /// ([`Ablations::use_depth`]) and does not take it from a fit
+    /// ([`RunPolicy::depth_from_fit`]). Otherwise a dataset may be loaded without them
+    /// ([`rgbd_dataset::DepthKind::None`]), and need not say how they measure depth.
+    ///
+    /// ```
+    /// let tiny = singrav::TrainConfig::preset("tiny")?;
+    /// assert!(tiny.reads_depth_maps());
+    /// assert!(!tiny.clone().with(|c| c.ablations.use_depth = false).reads_depth_maps());
+    /// assert!(!tiny.with(|c| c.run.depth_from_fit = true).reads_depth_maps());
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn reads_depth_maps(&self) -> bool {
+        self.ablations.use_depth && !self.run.depth_from_fit
+    }
+
+    /// The fit of the training views without depth whose rendered depth a run with
+    /// [`RunPolicy::depth_from_fit`] trains on: volume-fit's defaults (64^3), colour and
+    /// opacity only, over the model's cube (in the scene's coordinates under the run's
+    /// `bounds`).
+    ///
+    /// ```
+    /// let config = singrav::TrainConfig::preset("tiny")?.with(|c| c.run.depth_from_fit = true);
+    /// let fit = config.depth_fit_config();
+    /// assert!(!fit.use_depth);
+    /// assert_eq!(fit.size, volume_fit::FitConfig::default().size);
+    /// # Ok::<(), singrav::Error>(())
+    /// ```
+    pub fn depth_fit_config(&self) -> volume_fit::FitConfig {
+        volume_fit::FitConfig {
+            use_depth: false,
             aabb: self
                 .run
                 .bounds

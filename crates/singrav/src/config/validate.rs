@@ -159,17 +159,8 @@ impl TrainConfig {
 
     fn validate_losses(&self) -> Result<()> {
         let losses = &self.losses;
-        for (field, weight) in [
-            ("losses.rgb", losses.rgb),
-            ("losses.depth", losses.depth),
-            ("losses.opacity", losses.opacity),
-            ("losses.swd", losses.swd),
-            ("losses.colour_distribution", losses.colour_distribution),
-            ("losses.chroma_distribution", losses.chroma_distribution),
-            ("losses.fitted", losses.fitted),
-            ("losses.volume_critic", losses.volume_critic),
-            ("critics.gradient_penalty", self.critics.gradient_penalty),
-        ] {
+        let penalty = ("critics.gradient_penalty", self.critics.gradient_penalty);
+        for (field, weight) in losses.weights().into_iter().chain([penalty]) {
             check_weight(field, weight)?;
         }
         // The terms on the samples' rendered opacity read it from the critics' views.
@@ -177,7 +168,6 @@ impl TrainConfig {
             ("losses.height_profile", losses.height_profile),
             ("losses.opacity_binary", losses.opacity_binary),
         ] {
-            check_weight(field, weight)?;
             if weight > 0.0 && !self.critics.opacity {
                 return Err(invalid(
                     field,

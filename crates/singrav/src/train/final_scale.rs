@@ -167,7 +167,7 @@ impl Stage for FinalScale<'_> {
                 .upsample_images(&select(&self.reconstruction, &rec_views)?)?;
             let real = select(&self.fine.images, &rec_views)?;
             terms.add(
-                LossTerm::Colour,
+                LossTerm::Rgb,
                 (mse(&rebuilt, &real)? * self.config.losses.rgb)?,
             );
             means.add(&terms)?;

@@ -1,6 +1,6 @@
 //! A directly fitted volume (see [`volume_fit`]) as a 3D target for the reconstruction V*_n:
 //! an exact, cheap comparison that gives every voxel a gradient, where the views give only the
-//! voxels along a few rays; and where a run gets it ([`load_fitted_target`]).
+//! voxels along a few rays ([`super::prepare`] says where a run gets it).
 
 use std::path::Path;
 
@@ -10,7 +10,6 @@ use rgbd_dataset::Dataset;
 use volrender::DensityInterpolation;
 use volume_fit::{fit_volume, FitProgress, FittedVolume};
 
-use super::RunOptions;
 use crate::config::TrainConfig;
 use crate::error::{invalid, Result};
 
@@ -264,48 +263,6 @@ pub(crate) fn load_fitted(path: &Path, cube: Aabb) -> Result<RadianceVolume> {
     }
 }
 
-/// The run's copy of the fitted volume, so that a resumed run compares with what it started with.
-pub(super) const FITTED_FILE: &str = "fitted.safetensors";
-
-/// The fitted volume a configuration with `losses.fitted > 0` (or a 3D critic) trains against,
-/// and whether it is new to the run (to be copied into it): the one `options` names, else on
-/// resume the run's copy, else [`fit_training_target`] of `dataset` made now. Errors when one is
-/// given and not needed.
-pub(super) fn load_fitted_target(
-    config: &TrainConfig,
-    options: &RunOptions,
-    run_dir: &Path,
-    dataset: &Dataset,
-) -> Result<Option<(RadianceVolume, bool)>> {
-    let copy = run_dir.join(FITTED_FILE);
-    if config.losses.fitted == 0.0 && config.losses.volume_critic == 0.0 {
-        return match &options.fitted_volume {
-            Some(path) => Err(invalid(
-                "fitted volume",
-                format!(
-                    "{} was given but the configuration's losses.fitted and \
-                     losses.volume_critic are 0; set a positive weight to train against it",
-                    path.display()
-                ),
-            )),
-            None => Ok(None),
-        };
-    }
-    let (path, new) = match &options.fitted_volume {
-        Some(path) => (path.clone(), *path != copy),
-        None if options.resume && copy.exists() => (copy, false),
-        None => {
-            let fitted = fit_training_target(config, dataset, None, &mut |_| {})?;
-            return Ok(Some((fitted.volume, true)));
-        }
-    };
-    let cube = config
-        .run
-        .bounds
-        .map_or(radiance_volume::Aabb::CUBE, |bounds| bounds.cube());
-    Ok(Some((load_fitted(&path, cube)?, new)))
-}
-
 /// The direct fit a run of `config` compares with when given none: `dataset`'s training views
 /// (all but those `config.run.holdout` keeps out, so held-out views stay held out), in the
 /// scene's coordinates, fitted as [`TrainConfig::fit_config`] says, for `steps` steps instead of
@@ -329,10 +286,7 @@ pub fn fit_training_target(
         budget: steps.map_or(defaults.budget, volume_fit::FitBudget::Steps),
         ..defaults
     };
-    let training = match config.run.holdout {
-        Some(every) => dataset.holdout_split(every)?.0,
-        None => (0..dataset.len()).collect(),
-    };
+    let training = super::prepare::training_views(config, dataset)?;
     Ok(fit_volume(dataset, &training, &fit_config, observer)?)
 }
 

@@ -1,25 +1,74 @@
-//! The JSON-lines loss log: one object per iteration, appended as training goes.
+//! The JSON-lines loss log: one object per iteration, appended as training goes
+//! ([`LossLog`]), and read back ([`read_log`]).
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use serde::Serialize;
 
-use super::StepLosses;
-use crate::error::{io_error, Result};
+use super::{LossTerm, StepLosses};
+use crate::error::{invalid, io_error, Result};
+use crate::run_dir::RunDir;
 
-/// The log's file name inside a run directory.
-pub const LOG_FILE: &str = "log.jsonl";
-
-/// One line of the log.
-#[derive(Serialize)]
-struct Line<'a> {
-    scale: usize,
-    iteration: usize,
-    seconds: f64,
+/// One line of a run's loss log: an iteration and its losses ([`LossTerm::key`]s, `null`
+/// where not computed).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LogLine {
+    /// The scale (1-based).
+    pub scale: usize,
+    /// The iteration within the scale (0-based).
+    pub iteration: usize,
+    /// Seconds of training when it ended, over all scales.
+    pub seconds: f64,
+    /// Its losses.
     #[serde(flatten)]
-    losses: &'a StepLosses,
+    pub losses: StepLosses,
+}
+
+/// Reads a run's loss log ([`RunDir::log`]), as this volgen writes it or an earlier one did:
+/// keys earlier volgens wrote for a term are read as the term ([`LossTerm::from_key`]), keys of
+/// terms since removed (`opacity_distribution`) are passed over.
+///
+/// ```no_run
+/// let log = singrav::train::read_log(&singrav::RunDir::new("runs/stones"))?;
+/// let last = log.last().expect("a line per iteration");
+/// println!("scale {}: {:?}", last.scale, last.losses.get(singrav::train::LossTerm::Rgb));
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn read_log(run: &RunDir) -> Result<Vec<LogLine>> {
+    let path = run.log();
+    let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(i, line)| {
+            parse_line(line).ok_or_else(|| {
+                invalid(
+                    format!("{} line {}", path.display(), i + 1),
+                    "expected a JSON object with scale, iteration, seconds and losses",
+                )
+            })
+        })
+        .collect()
+}
+
+/// A log line, if it is one.
+fn parse_line(line: &str) -> Option<LogLine> {
+    let value: serde_json::Value = serde_json::from_str(line).ok()?;
+    let fields = value.as_object()?;
+    let mut losses = StepLosses::default();
+    for (key, value) in fields {
+        if let (Some(term), Some(value)) = (LossTerm::from_key(key), value.as_f64()) {
+            losses.set(term, value as f32);
+        }
+    }
+    Some(LogLine {
+        scale: usize::try_from(fields.get("scale")?.as_u64()?).ok()?,
+        iteration: usize::try_from(fields.get("iteration")?.as_u64()?).ok()?,
+        seconds: fields.get("seconds")?.as_f64()?,
+        losses,
+    })
 }
 
 /// An open log.
@@ -29,16 +78,18 @@ pub(super) struct LossLog {
 }
 
 impl LossLog {
-    /// Opens `run_dir/log.jsonl`. A fresh run starts it empty; a resumed run keeps only the
-    /// lines before the checkpoint's position (`scale`, `iteration`), dropping what the killed
-    /// run logged after its last checkpoint, so the log reads as one uninterrupted run.
-    pub fn open(run_dir: &Path, resume_from: Option<(usize, usize)>) -> Result<Self> {
-        let path = run_dir.join(LOG_FILE);
+    /// Opens the run's log ([`RunDir::log`]). A fresh run starts it empty; a resumed run keeps
+    /// only the lines before the checkpoint's position (`scale`, `iteration`), dropping what the
+    /// killed run logged after its last checkpoint, so the log reads as one uninterrupted run.
+    pub fn open(run: &RunDir, resume_from: Option<(usize, usize)>) -> Result<Self> {
+        let path = run.log();
         let kept = match resume_from {
             Some(position) if path.exists() => {
                 let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
                 text.lines()
-                    .filter(|line| line_position(line).is_some_and(|p| p < position))
+                    .filter(|line| {
+                        parse_line(line).is_some_and(|l| (l.scale, l.iteration) < position)
+                    })
                     .map(|line| format!("{line}\n"))
                     .collect::<String>()
             }
@@ -60,11 +111,11 @@ impl LossLog {
         seconds: f64,
         losses: &StepLosses,
     ) -> Result<()> {
-        let line = Line {
+        let line = LogLine {
             scale,
             iteration,
             seconds,
-            losses,
+            losses: *losses,
         };
         let mut text = serde_json::to_string(&line).map_err(|e| crate::error::Error::Io {
             path: self.path.clone(),
@@ -77,11 +128,27 @@ impl LossLog {
     }
 }
 
-/// The (scale, iteration) of a log line, if it parses.
-fn line_position(line: &str) -> Option<(usize, usize)> {
-    let value: serde_json::Value = serde_json::from_str(line).ok()?;
-    Some((
-        value.get("scale")?.as_u64()? as usize,
-        value.get("iteration")?.as_u64()? as usize,
-    ))
+#[cfg(test)]
+mod tests {
+    use super::{parse_line, LogLine, LossTerm, StepLosses};
+
+    #[test]
+    fn a_line_reads_back_as_written_and_old_keys_as_their_terms() {
+        let mut losses = StepLosses::default();
+        losses.set(LossTerm::Rgb, 0.25);
+        losses.set(LossTerm::VolumeAdversarial, -2.0);
+        let line = LogLine {
+            scale: 2,
+            iteration: 7,
+            seconds: 1.5,
+            losses,
+        };
+        let text = serde_json::to_string(&line).unwrap();
+        assert_eq!(parse_line(&text), Some(line.clone()));
+        // A line of a volgen before the names agreed: `color`, and a removed term's key.
+        let old = r#"{"scale":2,"iteration":7,"seconds":1.5,"critic":null,"color":0.25,
+            "volume_adversarial":-2.0,"opacity_distribution":0.5}"#;
+        assert_eq!(parse_line(old), Some(line));
+        assert_eq!(parse_line(r#"{"scale":1}"#), None);
+    }
 }

@@ -1,109 +1,122 @@
-//! Losses as data: every term an iteration can report has a name ([`LossTerm`]); a generator
-//! step collects its weighted terms in order ([`StepTerms`]), sums them for the backward pass
-//! and reads all their values back in one transfer; an iteration reports each term's mean over
-//! its steps ([`StepLosses`]). A new loss term is a variant here and one `add` where it is
-//! computed.
+//! Losses as data: every term an iteration can report is a row of one table ([`LossTerm`]:
+//! its key in the log, its short name on the progress bar, its description in messages and the
+//! setting that weighs it); a generator step collects its weighted terms in order
+//! ([`StepTerms`]), sums them for the backward pass and reads all their values back in one
+//! transfer; an iteration reports each term's mean over its steps ([`StepLosses`]). A new loss
+//! term is a row here, its weight in [`crate::config::Losses`] and one `add` where it is
+//! computed (docs/architecture.md has the recipe).
 
 use candle_core::{DType, Device, Tensor};
 use serde::ser::{Serialize, SerializeMap, Serializer};
 
 use crate::error::Result;
 
-/// Every loss term an iteration can report, in the order `log.jsonl` writes them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum LossTerm {
-    /// Critic loss `mean D(fake) - mean D(real)` (before the penalty).
-    Critic,
-    /// The critic's gradient penalty (weighted).
-    Penalty,
-    /// Generator adversarial loss `-mean D(fake)`.
-    Adversarial,
-    /// Weighted colour reconstruction `losses.rgb * mse`.
-    Colour,
-    /// Weighted depth reconstruction `losses.depth * mse`.
-    Depth,
-    /// Weighted sliced Wasserstein texture loss (last scale).
-    Swd,
-    /// Weighted 3D comparison of the reconstruction with the fitted volume.
-    Fitted,
-    /// Weighted opacity reconstruction `losses.opacity * mse(opacity, alpha)`.
-    Opacity,
-    /// Weighted colour-distribution loss of the generated scenes.
-    ColourDistribution,
-    /// Weighted chroma-distribution loss of the generated scenes.
-    ChromaDistribution,
-    /// Weighted height-profile loss of the generated scenes.
-    HeightProfile,
-    /// Weighted binary-opacity prior of the generated scenes.
-    OpacityBinary,
-    /// The 3D critic's loss `mean D3(fake) - mean D3(fitted)`.
-    VolumeCritic,
-    /// The 3D critic's gradient penalty (weighted).
-    VolumePenalty,
-    /// The generator's weighted adversarial loss against the 3D critic.
-    VolumeAdversarial,
+/// Defines [`LossTerm`] from its table: per term its variant, log key, short name, description
+/// and weight (a dotted path of the configuration, or `None`), in log order.
+macro_rules! loss_terms {
+    ($(
+        $(#[$doc:meta])*
+        $term:ident: $key:literal, $short:literal, $describe:literal, $weight:expr;
+    )*) => {
+        /// Every loss term an iteration can report, in the order `log.jsonl` writes them.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+        pub enum LossTerm {
+            $($(#[$doc])* $term,)*
+        }
+
+        impl LossTerm {
+            /// Every term, in log order.
+            pub const ALL: [LossTerm; [$($key),*].len()] = [$(LossTerm::$term),*];
+
+            /// The term's key in the loss log (and in `volgen demo`'s summary).
+            pub fn key(self) -> &'static str {
+                match self {
+                    $(LossTerm::$term => $key,)*
+                }
+            }
+
+            /// The term's name on `volgen train`'s progress bar: its key, or a shorter form of
+            /// it.
+            pub fn short_name(self) -> &'static str {
+                match self {
+                    $(LossTerm::$term => $short,)*
+                }
+            }
+
+            /// The term in words, for messages ("the RGB reconstruction is NaN").
+            pub fn describe(self) -> &'static str {
+                match self {
+                    $(LossTerm::$term => $describe,)*
+                }
+            }
+
+            /// The dotted path of the setting that weighs the term, if one does.
+            pub fn weight(self) -> Option<&'static str> {
+                match self {
+                    $(LossTerm::$term => $weight,)*
+                }
+            }
+        }
+    };
 }
 
+loss_terms! {
+    /// Critic loss `mean D(fake) - mean D(real)` (before the penalty).
+    Critic: "critic", "D", "critic loss", None;
+    /// The critic's gradient penalty (weighted).
+    Penalty: "penalty", "gp", "gradient penalty", Some("critics.gradient_penalty");
+    /// Generator adversarial loss `-mean D(fake)`.
+    Adversarial: "adversarial", "adv", "adversarial loss", None;
+    /// Weighted reconstruction of the views' RGB, `losses.rgb * mse`.
+    Rgb: "rgb", "rgb", "RGB reconstruction", Some("losses.rgb");
+    /// Weighted depth reconstruction `losses.depth * mse`.
+    Depth: "depth", "depth", "depth reconstruction", Some("losses.depth");
+    /// Weighted sliced Wasserstein texture loss (last scale).
+    Swd: "swd", "swd", "SWD texture loss", Some("losses.swd");
+    /// Weighted 3D comparison of the reconstruction with the fitted volume.
+    Fitted: "fitted", "fitted", "fitted-volume comparison", Some("losses.fitted");
+    /// Weighted opacity reconstruction `losses.opacity * mse(opacity, alpha)`.
+    Opacity: "opacity", "opacity", "opacity reconstruction", Some("losses.opacity");
+    /// Weighted colour-distribution loss of the generated scenes.
+    ColourDistribution: "colour_distribution", "colour_dist", "colour distribution",
+        Some("losses.colour_distribution");
+    /// Weighted chroma-distribution loss of the generated scenes.
+    ChromaDistribution: "chroma_distribution", "chroma_dist", "chroma distribution",
+        Some("losses.chroma_distribution");
+    /// Weighted height-profile loss of the generated scenes.
+    HeightProfile: "height_profile", "height", "height profile", Some("losses.height_profile");
+    /// Weighted binary-opacity prior of the generated scenes.
+    OpacityBinary: "opacity_binary", "binary", "binary-opacity prior",
+        Some("losses.opacity_binary");
+    /// The 3D critic's loss `mean D3(fake) - mean D3(fitted)`.
+    VolumeCritic: "volume_critic", "D3", "3D critic loss", None;
+    /// The 3D critic's gradient penalty (weighted).
+    VolumePenalty: "volume_penalty", "gp3", "3D critic's gradient penalty",
+        Some("critics.gradient_penalty");
+    /// The generator's adversarial loss against the 3D critic, weighted by the 3D critic's
+    /// weight.
+    VolumeAdversarial: "volume_adversarial", "adv3", "3D adversarial loss",
+        Some("losses.volume_critic");
+}
+
+/// Keys earlier volgens wrote for a term, still read from their logs ([`LossTerm::from_key`]).
+const RETIRED_KEYS: [(&str, LossTerm); 1] = [("color", LossTerm::Rgb)];
+
 impl LossTerm {
-    /// Every term, in log order.
-    pub const ALL: [LossTerm; 15] = [
-        LossTerm::Critic,
-        LossTerm::Penalty,
-        LossTerm::Adversarial,
-        LossTerm::Colour,
-        LossTerm::Depth,
-        LossTerm::Swd,
-        LossTerm::Fitted,
-        LossTerm::Opacity,
-        LossTerm::ColourDistribution,
-        LossTerm::ChromaDistribution,
-        LossTerm::HeightProfile,
-        LossTerm::OpacityBinary,
-        LossTerm::VolumeCritic,
-        LossTerm::VolumePenalty,
-        LossTerm::VolumeAdversarial,
-    ];
-
-    /// The term's key in `log.jsonl`.
-    pub fn key(self) -> &'static str {
-        match self {
-            LossTerm::Critic => "critic",
-            LossTerm::Penalty => "penalty",
-            LossTerm::Adversarial => "adversarial",
-            LossTerm::Colour => "color",
-            LossTerm::Depth => "depth",
-            LossTerm::Swd => "swd",
-            LossTerm::Fitted => "fitted",
-            LossTerm::Opacity => "opacity",
-            LossTerm::ColourDistribution => "colour_distribution",
-            LossTerm::ChromaDistribution => "chroma_distribution",
-            LossTerm::HeightProfile => "height_profile",
-            LossTerm::OpacityBinary => "opacity_binary",
-            LossTerm::VolumeCritic => "volume_critic",
-            LossTerm::VolumePenalty => "volume_penalty",
-            LossTerm::VolumeAdversarial => "volume_adversarial",
-        }
-    }
-
-    /// The term in words, for messages ("the colour reconstruction is NaN").
-    pub fn describe(self) -> &'static str {
-        match self {
-            LossTerm::Critic => "critic loss",
-            LossTerm::Penalty => "gradient penalty",
-            LossTerm::Adversarial => "adversarial loss",
-            LossTerm::Colour => "colour reconstruction",
-            LossTerm::Depth => "depth reconstruction",
-            LossTerm::Swd => "SWD loss",
-            LossTerm::Fitted => "fitted-volume comparison",
-            LossTerm::Opacity => "opacity reconstruction",
-            LossTerm::ColourDistribution => "colour distribution",
-            LossTerm::ChromaDistribution => "chroma distribution",
-            LossTerm::HeightProfile => "height profile",
-            LossTerm::OpacityBinary => "binary-opacity prior",
-            LossTerm::VolumeCritic => "3D critic loss",
-            LossTerm::VolumePenalty => "3D critic's gradient penalty",
-            LossTerm::VolumeAdversarial => "3D adversarial loss",
-        }
+    /// The term of a log key: its own, or one an earlier volgen wrote for it (`color` before
+    /// 2026-12-06 for [`LossTerm::Rgb`]).
+    ///
+    /// ```
+    /// use singrav::train::LossTerm;
+    /// assert_eq!(LossTerm::from_key("rgb"), Some(LossTerm::Rgb));
+    /// assert_eq!(LossTerm::from_key("color"), Some(LossTerm::Rgb));
+    /// assert_eq!(LossTerm::from_key("seconds"), None);
+    /// ```
+    pub fn from_key(key: &str) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|term| term.key() == key)
+            .or_else(|| RETIRED_KEYS.iter().find(|(old, _)| *old == key).map(|(_, t)| *t))
     }
 
     fn index(self) -> usize {
@@ -116,8 +129,8 @@ impl LossTerm {
 /// ```
 /// use singrav::train::{LossTerm, StepLosses};
 /// let mut losses = StepLosses::default();
-/// losses.set(LossTerm::Colour, 0.5);
-/// assert_eq!(losses.get(LossTerm::Colour), Some(0.5));
+/// losses.set(LossTerm::Rgb, 0.5);
+/// assert_eq!(losses.get(LossTerm::Rgb), Some(0.5));
 /// assert_eq!(losses.get(LossTerm::Critic), None);
 /// assert_eq!(losses.iter().count(), 1);
 /// ```
@@ -242,15 +255,50 @@ mod tests {
     use candle_core::{Device, Tensor, Var};
 
     use super::{LossTerm, StepLosses, StepMeans, StepTerms};
+    use crate::TrainConfig;
+
+    /// One name per term from the configuration to the log and the progress bar.
+    #[test]
+    fn every_weight_weighs_one_term_and_every_term_has_names_of_its_own() {
+        let config = TrainConfig::preset("tiny").unwrap();
+        for (path, _) in config.losses.weights() {
+            let weighed: Vec<LossTerm> = LossTerm::ALL
+                .into_iter()
+                .filter(|term| term.weight() == Some(path))
+                .collect();
+            assert_eq!(weighed.len(), 1, "{path}: {weighed:?}");
+            let key = path.strip_prefix("losses.").unwrap();
+            if weighed[0] != LossTerm::VolumeAdversarial {
+                // The weight's name is the term's key (the 3D critic's weight weighs the
+                // generator's term against that critic, `volume_adversarial`).
+                assert_eq!(weighed[0].key(), key);
+            }
+        }
+        for term in LossTerm::ALL {
+            if let Some(path) = term.weight() {
+                config.clone().with_setting(path, "1").unwrap();
+            }
+            assert_eq!(LossTerm::from_key(term.key()), Some(term));
+        }
+        let names: [fn(LossTerm) -> &'static str; 3] =
+            [LossTerm::key, LossTerm::short_name, LossTerm::describe];
+        for name in names {
+            let mut all: Vec<&str> = LossTerm::ALL.into_iter().map(name).collect();
+            assert!(all.iter().all(|n| !n.is_empty()));
+            all.sort_unstable();
+            all.dedup();
+            assert_eq!(all.len(), LossTerm::ALL.len(), "{all:?}");
+        }
+    }
 
     #[test]
     fn the_log_has_every_term_in_order_with_null_where_not_computed() {
         let mut losses = StepLosses::default();
-        losses.set(LossTerm::Colour, 0.25);
+        losses.set(LossTerm::Rgb, 0.25);
         losses.set(LossTerm::Critic, -1.5);
         let json = serde_json::to_string(&losses).unwrap();
         assert!(
-            json.starts_with(r#"{"critic":-1.5,"penalty":null,"adversarial":null,"color":0.25"#)
+            json.starts_with(r#"{"critic":-1.5,"penalty":null,"adversarial":null,"rgb":0.25"#)
         );
         assert!(json.ends_with(r#""volume_adversarial":null}"#), "{json}");
         let keys: Vec<&str> = LossTerm::ALL.iter().map(|t| t.key()).collect();
@@ -264,7 +312,7 @@ mod tests {
     fn a_steps_total_is_the_sum_in_order_and_its_values_are_read_back_together() {
         let x = Var::new(2.0f32, &Device::Cpu).unwrap();
         let mut terms = StepTerms::new();
-        terms.add(LossTerm::Colour, (x.as_tensor() * 3.0).unwrap());
+        terms.add(LossTerm::Rgb, (x.as_tensor() * 3.0).unwrap());
         terms.add(LossTerm::Depth, x.as_tensor().sqr().unwrap());
         let total = terms.total(&Device::Cpu).unwrap();
         assert_eq!(total.to_scalar::<f32>().unwrap(), 10.0);
@@ -273,7 +321,7 @@ mod tests {
         assert_eq!(grads.get(&x).unwrap().to_scalar::<f32>().unwrap(), 7.0);
         assert_eq!(
             terms.values().unwrap(),
-            [(LossTerm::Colour, 6.0), (LossTerm::Depth, 4.0)]
+            [(LossTerm::Rgb, 6.0), (LossTerm::Depth, 4.0)]
         );
     }
 
@@ -282,12 +330,12 @@ mod tests {
         let mut means = StepMeans::new();
         for value in [1.0f32, 3.0] {
             let mut terms = StepTerms::new();
-            terms.add(LossTerm::Colour, Tensor::new(value, &Device::Cpu).unwrap());
+            terms.add(LossTerm::Rgb, Tensor::new(value, &Device::Cpu).unwrap());
             means.add(&terms).unwrap();
         }
         let mut losses = StepLosses::default();
         means.write_into(&mut losses);
-        assert_eq!(losses.get(LossTerm::Colour), Some(2.0));
+        assert_eq!(losses.get(LossTerm::Rgb), Some(2.0));
         assert_eq!(losses.iter().count(), 1);
     }
 }

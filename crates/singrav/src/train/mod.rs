@@ -10,6 +10,7 @@ mod fitted;
 mod height_profile;
 mod log;
 mod losses;
+mod prepare;
 mod reconstruction_fit;
 mod run;
 mod sample_opacity;
@@ -20,7 +21,9 @@ mod volume_scale;
 use std::path::PathBuf;
 
 pub use fitted::fit_training_target;
+pub use log::{read_log, LogLine};
 pub use losses::{LossTerm, StepLosses};
+pub use prepare::{beyond_the_cube, prepare, FitMade, RunFit, RunInputs};
 pub use run::{train, TrainOutcome, Trainer};
 
 /// The process's peak resident memory in MiB (Linux `VmHWM`), if the OS reports it; recorded
@@ -56,12 +59,22 @@ pub struct RunOptions {
     /// convert them) for a configuration whose `losses.swd_features` is
     /// [`crate::SwdFeatures::Vgg19`]; required then, refused otherwise.
     pub vgg19_weights: Option<PathBuf>,
-    /// A directly fitted volume (see [`volume_fit`]) for a configuration whose
-    /// `losses.fitted` or `losses.volume_critic` is positive, refused otherwise. Without one
-    /// such a run fits the training views itself first
-    /// ([`TrainConfig::fit_config`](crate::TrainConfig::fit_config); `tiny`'s takes about 10 s), and a resumed run
-    /// uses its own copy (`fitted.safetensors`).
+    /// A directly fitted volume (see [`volume_fit`]) for a configuration that compares with
+    /// one ([`TrainConfig::compares_with_fit`](crate::TrainConfig::compares_with_fit)), refused
+    /// otherwise. Without one such a run fits the training views itself first
+    /// ([`TrainConfig::fit_config`](crate::TrainConfig::fit_config); `tiny`'s takes about
+    /// 10 s), and a resumed run uses its own copy ([`RunDir::fitted`](crate::RunDir::fitted)).
     pub fitted_volume: Option<PathBuf>,
+    /// Steps of the fit a run makes when it compares with a fitted volume and is given none
+    /// (default: the fit's own budget).
+    pub fit_steps: Option<usize>,
+    /// A fit of the views without depth for a run with `run.depth_from_fit`, whose rendered
+    /// depth it trains on. Without one such a run fits one itself first
+    /// ([`TrainConfig::depth_fit_config`](crate::TrainConfig::depth_fit_config)), and a resumed
+    /// run uses its own copy ([`RunDir::depth_fit`](crate::RunDir::depth_fit)).
+    pub depth_fit: Option<PathBuf>,
+    /// Steps of that fit (default: the fit's own budget).
+    pub depth_fit_steps: Option<usize>,
     /// Test hook: before iteration `.1` (0-based) of scale `.0`, every weight of that scale's
     /// generator becomes NaN, so tests can check that a divergence stops the run at once and
     /// leaves the last checkpoint intact.

@@ -1,4 +1,4 @@
-//! The last step of a run with `reconstruction_fit_steps`: a direct fit of the finished V* to
+//! The last step of a run with `schedule.reconstruction_fit_steps`: a direct fit of the finished V* to
 //! the training views, every network frozen, kept as the reconstruction's detail.
 //!
 //! The pyramid's V* is what one convolutional network per scale makes of the upsampled coarser

@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
@@ -13,20 +13,20 @@ use rgbd_dataset::{Dataset, DatasetLevel};
 use swd_loss::Vgg19;
 
 use super::final_scale::FinalScale;
-use super::fitted::{load_fitted_target, FITTED_FILE};
 use super::log::LossLog;
 use super::losses::StepLosses;
+use super::prepare::{prepare, RunInputs};
 use super::reconstruction_fit::fit_reconstruction;
 use super::stage::{Stage, CRITIC_PREFIX, VOLUME_CRITIC_PREFIX};
-use super::texture::load_vgg19;
-use super::volume_scale::{picture_path, reconstruction_rmse, VolumeScale};
+use super::volume_scale::{reconstruction_rmse, VolumeScale};
 use super::{Control, Event, Progress, RunOptions};
-use crate::checkpoint::{write_config_json, Checkpoint, TrainState, CHECKPOINT_FILE, CONFIG_FILE};
+use crate::checkpoint::{write_config_json, Checkpoint, TrainState};
 use crate::config::{settings_that_differ, TrainConfig};
 use crate::error::{invalid, Error, Result};
 use crate::model::{SinGrav, RECONSTRUCTION_DETAIL_TENSOR};
 use crate::noise::step_rng;
 use crate::render::ViewRenderer;
+use crate::run_dir::RunDir;
 
 /// How a call to [`train`] ended.
 pub enum TrainOutcome {
@@ -50,7 +50,7 @@ const PICTURE_STREAM: usize = usize::MAX - 1;
 /// [`Trainer::new`], [`Trainer::train_scale`] for every scale left, [`Trainer::finish`].
 ///
 /// With `options.resume`, continues from `run_dir`'s checkpoint (which must have been made with
-/// the same configuration, but for `reconstruction_fit_steps` while that fit has not run: a
+/// the same configuration, but for `schedule.reconstruction_fit_steps` while that fit has not run: a
 /// finished run can be given it later) and ends with the same weights as an uninterrupted run.
 /// Without it, refuses a directory that already holds a checkpoint rather than overwrite it.
 /// VGG-19 weights the configuration needs (`options.vgg19_weights`) are loaded before anything
@@ -69,25 +69,20 @@ pub fn train(
     device: &Device,
     observer: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<TrainOutcome> {
-    let mut trainer = Trainer::new(config, dataset, run_dir, options, device)?;
-    while !trainer.scales_done() {
-        if trainer.train_scale(observer)? == Control::Stop {
-            return Ok(TrainOutcome::Stopped);
-        }
-    }
-    trainer.finish(observer)
+    Trainer::new(config, dataset, run_dir, options, device)?.run(observer)
 }
 
 /// A training run in progress: the model so far, where training stands, and what the next
 /// scale starts from.
+///
+/// The configuration is the model's ([`SinGrav::config`]): the one the run was started with,
+/// checked against the checkpoint's when resumed; the trainer keeps no copy of its own.
 pub struct Trainer<'a> {
-    config: &'a TrainConfig,
     /// The training views in the model's cube (the caller's dataset itself when it has no
-    /// held-out views and no bounds to move).
+    /// held-out views, no bounds to move and no depth from a fit).
     dataset: Cow<'a, Dataset>,
-    run_dir: PathBuf,
-    checkpoint_file: PathBuf,
-    options: &'a RunOptions,
+    run: RunDir,
+    options: RunOptions,
     device: Device,
     vgg: Option<Vgg19>,
     fitted: Option<RadianceVolume>,
@@ -104,45 +99,55 @@ pub struct Trainer<'a> {
 
 impl<'a> Trainer<'a> {
     /// Starts the run in `run_dir`, or resumes it (`options.resume`) from its checkpoint, as
-    /// [`train`] describes; writes `config.json` and opens the loss log.
+    /// [`train`] describes: settles its inputs ([`prepare`], the fits included, without
+    /// progress), then [`Trainer::from_inputs`].
     pub fn new(
-        config: &'a TrainConfig,
+        config: &TrainConfig,
         dataset: &'a Dataset,
         run_dir: &Path,
-        options: &'a RunOptions,
+        options: &RunOptions,
+        device: &Device,
+    ) -> Result<Self> {
+        let run = RunDir::new(run_dir);
+        let inputs = prepare(config, dataset, &run, options, device, &mut |_, _| {})?;
+        Self::from_inputs(config, inputs, run_dir, device)
+    }
+
+    /// Starts or resumes the run in `run_dir` on inputs [`prepare`] settled for `config`: writes
+    /// `config.json` ([`RunDir::config`]) and opens the loss log.
+    pub fn from_inputs(
+        config: &TrainConfig,
+        inputs: RunInputs<'a>,
+        run_dir: &Path,
         device: &Device,
     ) -> Result<Self> {
         config.validate()?;
+        let run = RunDir::new(run_dir);
+        let RunInputs {
+            dataset,
+            options,
+            vgg,
+            fitted,
+            ..
+        } = inputs;
         let training = match config.run.holdout {
             Some(every) => Cow::Owned(dataset.subset(&dataset.holdout_split(every)?.0)?),
-            None => Cow::Borrowed(dataset),
+            None => dataset,
         };
-        let checkpoint_file = run_dir.join(CHECKPOINT_FILE);
-        if options.resume && !run_dir.exists() {
-            return Err(Error::Checkpoint {
-                path: checkpoint_file,
-                why: "no checkpoint here, nor a run directory (train a model first)".into(),
-            });
-        }
-        let vgg = load_vgg19(config, options.vgg19_weights.as_deref(), device)?;
-        let fitted = load_fitted_target(config, options, run_dir, dataset)?;
         let dataset = match &config.run.bounds {
             Some(bounds) => Cow::Owned(training.in_model_cube(bounds)?),
             None => training,
         };
-        crate::io::create_dir(run_dir)?;
-        if let Some((volume, true)) = &fitted {
-            volume.save_safetensors(run_dir.join(FITTED_FILE))?;
-        }
+        crate::io::create_dir(run.root())?;
         // A run killed before its first checkpoint has nothing to resume: it starts over.
-        let resume = options.resume && checkpoint_file.exists();
+        let resume = options.resume && run.has_checkpoint();
         let (model, state, saved, resumed_config) = if resume {
-            resume_from(&checkpoint_file, config, device)?
+            resume_from(&run.checkpoint(), config, device)?
         } else {
-            start(&checkpoint_file, config, &dataset, device)?
+            start(config, &dataset, device)?
         };
-        write_config_json(config, &run_dir.join(CONFIG_FILE))?;
-        let log = LossLog::open(run_dir, resume.then_some((state.scale, state.iteration)))?;
+        write_config_json(config, &run.config())?;
+        let log = LossLog::open(&run, resume.then_some((state.scale, state.iteration)))?;
         let previous_critics = saved
             .iter()
             .filter(|(name, _)| {
@@ -152,14 +157,12 @@ impl<'a> Trainer<'a> {
             .collect();
         let restore = (state.iteration > 0).then_some(saved);
         Ok(Self {
-            config,
             dataset,
-            run_dir: run_dir.to_path_buf(),
-            checkpoint_file,
+            run,
             options,
             device: device.clone(),
             vgg,
-            fitted: fitted.map(|(volume, _)| volume),
+            fitted,
             model,
             state,
             resumed_config,
@@ -169,10 +172,24 @@ impl<'a> Trainer<'a> {
         })
     }
 
+    /// Trains every scale left ([`Trainer::train_scale`]), then [`Trainer::finish`]; what
+    /// [`train`] does after [`Trainer::new`].
+    pub fn run(
+        mut self,
+        observer: &mut dyn FnMut(&Progress) -> Control,
+    ) -> Result<TrainOutcome> {
+        while !self.scales_done() {
+            if self.train_scale(observer)? == Control::Stop {
+                return Ok(TrainOutcome::Stopped);
+            }
+        }
+        self.finish(observer)
+    }
+
     /// Whether every scale is trained (the reconstruction fit may still be due:
     /// [`Trainer::finish`]).
     pub fn scales_done(&self) -> bool {
-        self.state.finished(self.config)
+        self.state.finished(self.model.config())
     }
 
     /// Where training stands.
@@ -189,10 +206,10 @@ impl<'a> Trainer<'a> {
         observer: &mut dyn FnMut(&Progress) -> Control,
     ) -> Result<Control> {
         let n = self.state.scale;
-        if n > self.config.scales() {
+        if n > self.model.config().scales() {
             return Err(invalid("scale", "every scale is trained already"));
         }
-        let mut setup = step_rng(self.config.run.seed, n, SETUP_STREAM);
+        let mut setup = step_rng(self.model.config().run.seed, n, SETUP_STREAM);
         let level = self
             .grow_model(n, &mut setup)
             .map_err(|e| located(e, n, "set-up"))?;
@@ -207,7 +224,7 @@ impl<'a> Trainer<'a> {
         };
         let mut stage = stage(&self.model, n, level, inputs, &mut setup)
             .map_err(|e| located(e, n, "set-up"))?;
-        let checkpoint_file = self.checkpoint_file.clone();
+        let checkpoint_file = self.run.checkpoint();
         if let Some(tensors) = restore {
             stage.parts().restore(
                 &tensors,
@@ -216,7 +233,7 @@ impl<'a> Trainer<'a> {
                 &self.device,
             )?;
         }
-        let schedule = self.config.scale_schedule(n);
+        let schedule = self.model.config().scale_schedule(n);
         let mut last_checkpoint = Instant::now();
         while self.state.iteration < schedule.iterations {
             let it = self.state.iteration;
@@ -227,7 +244,7 @@ impl<'a> Trainer<'a> {
             let losses = stage
                 .iteration(
                     it >= schedule.reconstruction_only,
-                    &mut step_rng(self.config.run.seed, n, it),
+                    &mut step_rng(self.model.config().run.seed, n, it),
                 )
                 .map_err(|e| located(diverged(e, n, it), n, &format!("iteration {it}")))?;
             check_finite(&losses, n, it)?;
@@ -236,7 +253,7 @@ impl<'a> Trainer<'a> {
             state.iteration += 1;
             self.log.append(n, it, total_seconds(state), &losses)?;
             let mut progress = progress(
-                self.config,
+                self.model.config(),
                 &self.state,
                 (n, self.state.iteration),
                 losses,
@@ -247,11 +264,11 @@ impl<'a> Trainer<'a> {
                 return Ok(Control::Stop);
             }
             if self.state.iteration < schedule.iterations
-                && checkpoint_due(self.config, &self.state, &last_checkpoint)
+                && checkpoint_due(self.model.config(), &self.state, &last_checkpoint)
             {
                 save_mid_scale(
-                    &self.checkpoint_file,
-                    self.config,
+                    &checkpoint_file,
+                    self.model.config(),
                     &self.state,
                     &self.model,
                     stage.as_mut(),
@@ -263,11 +280,11 @@ impl<'a> Trainer<'a> {
                 }
             }
         }
-        let picture = picture_path(&self.run_dir, n);
-        crate::io::create_dir(picture.parent().unwrap_or(&self.run_dir))?;
+        let picture = self.run.scale_picture(n);
+        crate::io::create_dir(&self.run.pictures())?;
         let rows = stage
             .picture_rows(
-                &mut step_rng(self.config.run.seed, n, PICTURE_STREAM),
+                &mut step_rng(self.model.config().run.seed, n, PICTURE_STREAM),
                 PICTURE_SAMPLES,
             )
             .map_err(|e| located(e, n, "pictures"))?;
@@ -285,7 +302,7 @@ impl<'a> Trainer<'a> {
         let seconds = self.state.scale_seconds.last().copied().unwrap_or(0.0);
         let done = Event::ScaleDone(picture);
         let progress = progress(
-            self.config,
+            self.model.config(),
             &self.state,
             (n, schedule.iterations),
             StepLosses::default(),
@@ -308,10 +325,10 @@ impl<'a> Trainer<'a> {
                 format!("scale {} is not trained yet", self.state.scale),
             ));
         }
-        let config = self.config;
+        let config = self.model.config().clone();
         let last = config.scales();
         let mut progress = progress(
-            config,
+            &config,
             &self.state,
             (last, config.scale_schedule(last).iterations),
             StepLosses::default(),
@@ -326,7 +343,7 @@ impl<'a> Trainer<'a> {
             }
             let fit = fit_reconstruction(
                 &mut self.model,
-                config,
+                &config,
                 &self.dataset,
                 self.state.depth_norm,
             )?;
@@ -341,9 +358,9 @@ impl<'a> Trainer<'a> {
         } else if self
             .resumed_config
             .as_ref()
-            .is_some_and(|saved| saved != config)
+            .is_some_and(|saved| *saved != config)
         {
-            // A finished run resumed with another `reconstruction_fit_steps` and nothing to fit:
+            // A finished run resumed with another `schedule.reconstruction_fit_steps` and nothing to fit:
             // the checkpoint records the configuration `config.json` now shows.
             self.save_boundary()?;
         }
@@ -359,14 +376,14 @@ impl<'a> Trainer<'a> {
         setup: &mut rand_chacha::ChaCha8Rng,
     ) -> Result<Option<DatasetLevel>> {
         let fresh = self.restore.is_none();
-        if n == self.config.scales() {
+        if n == self.model.config().scales() {
             if fresh {
                 self.model.push_upsampler(setup)?;
                 self.state.upsampler = true;
             }
             return Ok(None);
         }
-        let size = self.config.pyramid.image_sizes[n - 1];
+        let size = self.model.config().pyramid.image_sizes[n - 1];
         let level = self.dataset.level(size, size, &self.device)?;
         if fresh {
             let amp = noise_amplitude(&self.model, n, &level, self.state.depth_norm)?;
@@ -386,8 +403,8 @@ impl<'a> Trainer<'a> {
                 .map(|(name, t)| (name.clone(), t.clone())),
         );
         save(
-            &self.checkpoint_file,
-            self.config,
+            &self.run.checkpoint(),
+            self.model.config(),
             self.state.clone(),
             tensors,
         )
@@ -500,21 +517,9 @@ type Begun = (
     Option<TrainConfig>,
 );
 
-/// A new run: the model's fixed parts (seeded), nothing trained.
-fn start(
-    checkpoint_file: &Path,
-    config: &TrainConfig,
-    dataset: &Dataset,
-    device: &Device,
-) -> Result<Begun> {
-    if checkpoint_file.exists() {
-        return Err(Error::Checkpoint {
-            path: checkpoint_file.to_path_buf(),
-            why: "this run directory already holds a checkpoint; resume it (--resume) or \
-                  choose another directory"
-                .into(),
-        });
-    }
+/// A new run: the model's fixed parts (seeded), nothing trained ([`prepare`] has refused a
+/// directory that holds a checkpoint).
+fn start(config: &TrainConfig, dataset: &Dataset, device: &Device) -> Result<Begun> {
     let model = SinGrav::new(
         config,
         device,
@@ -675,7 +680,7 @@ fn prefixed(tensors: &HashMap<String, Tensor>, prefix: &str) -> HashMap<String, 
 }
 
 /// The configuration a resume must match: the checkpoint's, except that a run whose
-/// reconstruction was not fitted to the views yet may be given any `reconstruction_fit_steps`
+/// reconstruction was not fitted to the views yet may be given any `schedule.reconstruction_fit_steps`
 /// (the fit runs after every scale, so it can be added to a finished run, or dropped).
 fn resumable_config(checkpoint: &Checkpoint, wanted: &TrainConfig) -> TrainConfig {
     let mut config = checkpoint.config.clone();

@@ -24,7 +24,7 @@ const NOISE_OPT_PREFIX: &str = "opt_z.";
 
 /// One scale's training, as the trainer drives it.
 pub(super) trait Stage {
-    /// Runs one iteration (`d_steps` critic steps when `adversarial`, then `g_steps` generator
+    /// Runs one iteration (`schedule.d_steps` critic steps when `adversarial`, then `schedule.g_steps` generator
     /// steps) drawing all randomness from `rng`.
     fn iteration(
         &mut self,

@@ -63,7 +63,7 @@ pub(super) fn load_vgg19(
             "vgg19_weights",
             format!(
                 "{} was given, but the configuration's SWD loss does not use VGG-19 features \
-                 (use_swd = {}, swd_features = {:?})",
+                 (ablations.use_swd = {}, losses.swd_features = {:?})",
                 path.display(),
                 config.ablations.use_swd,
                 config.losses.swd_features
@@ -71,7 +71,7 @@ pub(super) fn load_vgg19(
         )),
         (true, None) => Err(invalid(
             "vgg19_weights",
-            "the configuration's SWD loss compares VGG-19 features (swd_features = vgg19); \
+            "the configuration's SWD loss compares VGG-19 features (losses.swd_features = vgg19); \
              give the weights file (torchvision's names, see docs/swd-loss.md)",
         )),
         (true, Some(path)) => Vgg19::from_safetensors(path, Vgg19Config::heitz(), device)

@@ -2,7 +2,6 @@
 //! reconstruction of the dataset views from the fixed noise.
 
 use std::collections::HashMap;
-use std::path::Path;
 
 use candle_core::{Tensor, D};
 use radiance_volume::RadianceVolume;
@@ -59,7 +58,7 @@ pub(super) struct VolumeScale<'a> {
     reconstruction_noise: Tensor,
     /// The fitted volume at this scale's size, when the run trains against one.
     fitted: Option<FittedTarget>,
-    /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
+    /// The 3D critic of volumes (runs with `losses.volume_critic > 0`), judging against
     /// `fitted`.
     volume_critic: Option<VolumeCritic>,
     /// Every training pixel's targets, when the reconstruction renders random pixels rather
@@ -227,8 +226,8 @@ impl<'a> VolumeScale<'a> {
     }
 
     /// Trains against `fitted` (resampled to this scale): the reconstruction is compared with
-    /// it in 3D, weighted by the configuration's `lambda_fitted`, and with a positive
-    /// `lambda_volume_critic` a 3D critic (seeded from `rng`, then copied from
+    /// it in 3D, weighted by the configuration's `losses.fitted`, and with a positive
+    /// `losses.volume_critic` a 3D critic (seeded from `rng`, then copied from
     /// `previous_volume_critic`, the last scale's, where shapes agree) judges the generated
     /// volumes against it.
     pub fn with_fitted(
@@ -456,7 +455,7 @@ impl<'a> VolumeScale<'a> {
                 (mse(opacity, &real.alpha)? * losses.opacity)?,
             );
         }
-        terms.add(LossTerm::Colour, (mse(&maps.rgb, &real.rgb)? * losses.rgb)?);
+        terms.add(LossTerm::Rgb, (mse(&maps.rgb, &real.rgb)? * losses.rgb)?);
         if let (Some(depth), Some(real_depth)) = (maps.depth, &real.depth) {
             let error = match &real.depth_mask {
                 None => mse(&depth, real_depth)?,
@@ -591,7 +590,7 @@ fn critic_view(
 }
 
 /// The critics' real batch `(V, C, h, w)` of a level: colour, then depth divided by
-/// `depth_norm` (with `use_depth`), then alpha (with `critic_opacity`), the channels
+/// `depth_norm` (with `ablations.use_depth`), then alpha (with `critics.opacity`), the channels
 /// [`ViewRenderer::render_joined`] renders for the fakes.
 fn critic_input(config: &TrainConfig, level: &DatasetLevel, depth_norm: f32) -> Result<Tensor> {
     let depth = (&level.depths / f64::from(depth_norm))?;
@@ -600,11 +599,6 @@ fn critic_input(config: &TrainConfig, level: &DatasetLevel, depth_norm: f32) -> 
         .chain(config.critics.opacity.then_some(&level.opacity))
         .collect();
     Ok(Tensor::cat(&channels, 1)?)
-}
-
-/// Where a picture of a scale's samples goes.
-pub(super) fn picture_path(run_dir: &Path, scale: usize) -> std::path::PathBuf {
-    run_dir.join("samples").join(format!("scale_{scale}.png"))
 }
 
 #[cfg(test)]
