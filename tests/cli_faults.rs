@@ -148,6 +148,7 @@ fn a_full_disk_names_the_file_and_its_size_and_keeps_the_last_checkpoint() {
     let run = tmp.path().join("full");
     let mut command = train_command(&data, &run);
     // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
+    #[allow(unsafe_code)] // The test's own process limit, set in the child before exec.
     unsafe {
         command.pre_exec(move || {
             let limit = libc::rlimit {

@@ -9,6 +9,7 @@ use std::time::Instant;
 use candle_core::{DType, Device, Tensor};
 use singrav::noise::{gaussian_volume, step_rng};
 use singrav::render::ViewRenderer;
+use singrav::sample::showcase_cameras;
 use singrav::{SinGrav, TrainConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -40,7 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let generator = started.elapsed().as_secs_f64();
         let image = config.pyramid.image_sizes[n - 1];
         let renderer = ViewRenderer::new(&config, config.pyramid.samples[n - 1], 5.0, true);
-        let cameras = model.showcase_cameras(config.schedule.views_per_step)?;
+        let cameras = showcase_cameras(config.schedule.views_per_step, image)?;
         let refs: Vec<_> = cameras.iter().collect();
         // A leaf of its own, so the backward below stops at the volume.
         let volume = candle_core::Var::from_tensor(&raw.detach())?;

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use clap::builder::TypedValueParser;
 use rgbd_dataset::scenes::SceneKind;
 use rgbd_dataset::{write_built_in, DatasetSpec};
 

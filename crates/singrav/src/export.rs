@@ -1,14 +1,11 @@
 //! Volumes for tools that interpolate physical density (Blender, OpenVDB's tools, `volgen
 //! render`): a volume as volgen's renderer takes it, written on a finer grid so that it renders
-//! there as volgen renders it ([`physical_upsampled`]), and a model's raw volume so written
-//! ([`SinGrav::to_physical_upsampled`]).
+//! there as volgen renders it.
 
-use candle_core::Tensor;
 use radiance_volume::{Activation, GridDims, RadianceVolume};
 use volrender::DensityInterpolation;
 
 use crate::error::{invalid, Result};
-use crate::model::SinGrav;
 
 /// The physical volume, on a grid `factor` times finer per axis, of `rendered`, a volume as
 /// volgen's renderer takes it under the density rule `density`: every fine voxel holds what
@@ -72,35 +69,4 @@ pub fn physical_upsampled(
     let sigma = activation.apply_density(&values.narrow(0, 0, 1)?)?;
     let colour = values.narrow(0, 1, values.dim(0)? - 1)?;
     Ok(fine.with_tensor(candle_core::Tensor::cat(&[&sigma, &colour], 0)?)?)
-}
-
-impl SinGrav {
-    /// The physical volume of a raw volume `(1, 4, s, s, s)` on a grid `factor` (odd) times
-    /// finer per axis, for renderers that interpolate physical density (Blender, OpenVDB
-    /// tools, volrender's `DensityInterpolation::Physical`): every fine voxel holds what the
-    /// model's own renderer computes at its centre ([`physical_upsampled`] of
-    /// [`SinGrav::to_rendered`]). For a run trained with
-    /// [`Rendering::post_activation`](crate::config::Rendering::post_activation) the edges between
-    /// its voxels come back; other runs' volumes render as at 1. `factor` 1 is
-    /// [`SinGrav::to_physical`] bit for bit; even factors are refused.
-    ///
-    /// ```
-    /// use candle_core::{DType, Device, Tensor};
-    /// use rand::SeedableRng;
-    /// let config = singrav::TrainConfig::preset("micro")?;
-    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
-    /// let raw = Tensor::zeros((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)?;
-    /// let fine = model.to_physical_upsampled(&raw, 3)?;
-    /// assert_eq!(fine.dims(), radiance_volume::GridDims::cube(9));
-    /// assert!(model.to_physical_upsampled(&raw, 2).is_err());
-    /// # Ok::<(), Box<dyn std::error::Error>>(())
-    /// ```
-    pub fn to_physical_upsampled(&self, raw: &Tensor, factor: usize) -> Result<RadianceVolume> {
-        if factor == 1 {
-            return self.to_physical(raw);
-        }
-        let (rendered, density) = self.to_rendered(raw)?;
-        physical_upsampled(&rendered, density, factor)
-    }
 }

@@ -3,7 +3,6 @@
 //! amplitudes and the fixed reconstruction noise z*_1.
 
 use std::collections::HashMap;
-use std::path::Path;
 use std::sync::Arc;
 
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
@@ -12,9 +11,8 @@ use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
 use radiance_volume::resample_tensor;
 
 use crate::active_set::active_sites;
-use crate::checkpoint::{Checkpoint, TrainState};
 use crate::config::TrainConfig;
-use crate::error::{invalid, Error, Result};
+use crate::error::{invalid, Result};
 use crate::extent::Extended;
 use crate::noise::{gaussian_grid, gaussian_volume};
 
@@ -27,11 +25,6 @@ pub const VOLUME_CHANNELS: usize = 4;
 ///
 /// Generators always normalise with the statistics of the volume they are given (BatchNorm in
 /// training mode, as SinGAN's code runs it), so generation does not depend on running averages.
-///
-/// Its methods are in one module per concern: building the pyramid, its noise, its tensors and
-/// [`SinGrav::load`] here; sampling, rendering and the cameras to compare samples from in
-/// [`crate::sample`]; scenes of other sizes in [`crate::extent`]; volumes for other tools in
-/// [`crate::export`]; editing, harmonisation and animation in [`crate::applications`].
 pub struct SinGrav {
     config: TrainConfig,
     device: Device,
@@ -40,7 +33,7 @@ pub struct SinGrav {
     noise_amps: Vec<f64>,
     z_star: Tensor,
     /// The reconstruction noise z*_n of the 3D scales n >= 2 built so far (index n - 2), when
-    /// the configuration optimises it (`noise.reconstruction_lr > 0`); zeros otherwise.
+    /// the configuration optimises it (`reconstruction_noise_lr > 0`); zeros otherwise.
     fine_z_star: Vec<Var>,
     /// Added to the finest 3D scale's reconstruction once training has fitted it to the views
     /// ([`Schedule::reconstruction_fit_steps`](crate::config::Schedule::reconstruction_fit_steps)): `(1, 4, s, s, s)` raw values.
@@ -337,7 +330,7 @@ impl SinGrav {
     }
 
     /// The reconstruction noise for 3D scales `1..=scales`: {z*_1, 0, ..., 0} as in SinGAN, or
-    /// with `noise.reconstruction_lr > 0` the optimised z*_n at the scales n >= 2.
+    /// with `reconstruction_noise_lr > 0` the optimised z*_n at the scales n >= 2.
     pub fn reconstruction_noise(&self, scales: usize) -> Result<Vec<Tensor>> {
         self.check_learned_size("the reconstruction noise")?;
         let mut noise = vec![self.z_star.clone()];
@@ -534,35 +527,6 @@ impl SinGrav {
                 .map_err(|e| format!("tensor `{RECONSTRUCTION_DETAIL_TENSOR}`: {e}"))?;
         }
         Ok(model)
-    }
-
-    /// Loads a trained pyramid from a run directory or checkpoint file, with its state (to
-    /// report, for example, whether training finished).
-    ///
-    /// ```no_run
-    /// let (model, state) = singrav::SinGrav::load("runs/stones".as_ref(), &candle_core::Device::Cpu)?;
-    /// println!("{} 3D scales, training at scale {}", model.volume_scales(), state.scale);
-    /// # Ok::<(), singrav::Error>(())
-    /// ```
-    pub fn load(model: &Path, device: &Device) -> Result<(Self, TrainState)> {
-        let path = crate::RunDir::checkpoint_of(model);
-        let checkpoint = Checkpoint::load(&path, device)?;
-        let state = checkpoint.state;
-        if state.noise_amps.is_empty() {
-            return Err(Error::Checkpoint {
-                path,
-                why: "no scale has been trained yet".into(),
-            });
-        }
-        let model = Self::from_tensors(
-            &checkpoint.config,
-            &checkpoint.tensors,
-            &state.noise_amps,
-            state.upsampler && state.finished(&checkpoint.config),
-            device,
-        )
-        .map_err(|why| Error::Checkpoint { path, why })?;
-        Ok((model, state))
     }
 }
 

@@ -1,14 +1,16 @@
 //! Sampling new scenes from a trained pyramid: a physical radiance volume per scene, and
 //! renderings through the upsampler from chosen cameras.
 
+use std::path::Path;
 use std::time::Instant;
 
-use candle_core::Tensor;
+use candle_core::{Device, Tensor};
 use glam::Vec3;
 use radiance_volume::{Aabb, Activation, RadianceVolume};
 use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
 
-use crate::error::Result;
+use crate::checkpoint::{Checkpoint, TrainState};
+use crate::error::{Error, Result};
 use crate::model::SinGrav;
 use crate::render::{ViewMaps, ViewRenderer};
 use rgbd_dataset::Dataset;
@@ -27,9 +29,20 @@ pub struct Sample {
     pub generation_seconds: f64,
 }
 
-/// `count` cameras `size` pixels wide at `radius` from the centre, 35 degrees above the ground,
-/// evenly spaced in azimuth and looking at the centre: fixed views for comparing samples
-/// ([`SinGrav::showcase_cameras`]).
+/// `count` cameras on the paper's radius at 35 degrees elevation, evenly spaced in azimuth,
+/// looking at the centre: fixed views for comparing samples.
+///
+/// ```
+/// let cams = singrav::sample::showcase_cameras(3, 32)?;
+/// assert_eq!(cams.len(), 3);
+/// assert!((cams[0].position().length() - volrender::PAPER_RADIUS).abs() < 1e-5);
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn showcase_cameras(count: usize, size: usize) -> Result<Vec<Camera>> {
+    showcase_cameras_at(count, size, PAPER_RADIUS)
+}
+
+/// [`showcase_cameras`] at `radius` from the centre.
 fn showcase_cameras_at(count: usize, size: usize, radius: f32) -> Result<Vec<Camera>> {
     let elevation = 35f32.to_radians();
     (0..count)
@@ -54,6 +67,29 @@ fn showcase_cameras_at(count: usize, size: usize, radius: f32) -> Result<Vec<Cam
 }
 
 impl SinGrav {
+    /// Loads a trained pyramid from a run directory or checkpoint file, with its state (to
+    /// report, for example, whether training finished).
+    pub fn load(model: &Path, device: &Device) -> Result<(Self, TrainState)> {
+        let path = crate::RunDir::checkpoint_of(model);
+        let checkpoint = Checkpoint::load(&path, device)?;
+        let state = checkpoint.state;
+        if state.noise_amps.is_empty() {
+            return Err(Error::Checkpoint {
+                path,
+                why: "no scale has been trained yet".into(),
+            });
+        }
+        let model = Self::from_tensors(
+            &checkpoint.config,
+            &checkpoint.tensors,
+            &state.noise_amps,
+            state.upsampler && state.finished(&checkpoint.config),
+            device,
+        )
+        .map_err(|why| Error::Checkpoint { path, why })?;
+        Ok((model, state))
+    }
+
     /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {
@@ -233,6 +269,35 @@ impl SinGrav {
         Ok(per_view.iter().sum::<f64>() / per_view.len().max(1) as f64)
     }
 
+    /// The physical volume of a raw volume `(1, 4, s, s, s)` on a grid `factor` (odd) times
+    /// finer per axis, for renderers that interpolate physical density (Blender, OpenVDB
+    /// tools, volrender's `DensityInterpolation::Physical`): every fine voxel holds what the
+    /// model's own renderer computes at its centre ([`crate::export::physical_upsampled`] of
+    /// [`SinGrav::to_rendered`]). For a run trained with
+    /// [`Rendering::post_activation`](crate::config::Rendering::post_activation) the edges between
+    /// its voxels come back; other runs' volumes render as at 1. `factor` 1 is
+    /// [`SinGrav::to_physical`] bit for bit; even factors are refused.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
+    /// let raw = Tensor::zeros((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)?;
+    /// let fine = model.to_physical_upsampled(&raw, 3)?;
+    /// assert_eq!(fine.dims(), radiance_volume::GridDims::cube(9));
+    /// assert!(model.to_physical_upsampled(&raw, 2).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn to_physical_upsampled(&self, raw: &Tensor, factor: usize) -> Result<RadianceVolume> {
+        if factor == 1 {
+            return self.to_physical(raw);
+        }
+        let (rendered, density) = self.to_rendered(raw)?;
+        crate::export::physical_upsampled(&rendered, density, factor)
+    }
+
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized
     /// [`SinGrav::render_size`]), doubled by the upsampler G_N when it is trained.
     pub fn render_raw(&self, raw: &Tensor, cameras: &[Camera]) -> Result<Tensor> {
@@ -308,23 +373,9 @@ impl SinGrav {
         }
     }
 
-    /// `count` cameras for this model's scenes, 35 degrees above the ground, evenly spaced in
-    /// azimuth and looking at the centre: fixed views for comparing samples. At the learned
-    /// size they stand at the paper's radius and render [`SinGrav::render_size`] pixels; at a
-    /// larger [extent](SinGrav::set_extent) both grow by the model box's largest half side, so
-    /// the whole scene is in view at the learned pixel size.
-    ///
-    /// ```
-    /// use rand::SeedableRng;
-    /// let config = singrav::TrainConfig::preset("micro")?;
-    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    /// let mut model = singrav::SinGrav::new(&config, &candle_core::Device::Cpu, &mut rng)?;
-    /// model.push_generator(1.0, &mut rng)?;
-    /// let cameras = model.showcase_cameras(3)?;
-    /// assert_eq!((cameras.len(), cameras[0].width), (3, model.render_size()));
-    /// assert!((cameras[0].position().length() - volrender::PAPER_RADIUS).abs() < 1e-5);
-    /// # Ok::<(), Box<dyn std::error::Error>>(())
-    /// ```
+    /// [`showcase_cameras`] for this model's scenes: at the learned size the paper's radius and
+    /// [`SinGrav::render_size`]; at a larger [extent](SinGrav::set_extent) both times the
+    /// model box's largest half side, so the whole scene is in view at the learned pixel size.
     ///
     /// ```no_run
     /// # let device = candle_core::Device::Cpu;
