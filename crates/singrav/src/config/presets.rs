@@ -32,6 +32,10 @@ const HD_FINEST_VOLUME: usize = 126;
 const HD_IMAGES: (usize, usize) = (32, 160);
 const HD_SAMPLES: (usize, usize) = (48, 128);
 
+/// Pixels of `hd`'s reconstruction per generator step, drawn over every view: as many as two
+/// of its finest renderings hold (160^2), where its 8 reconstruction views would hold 204,800.
+const HD_RECONSTRUCTION_PIXELS: usize = 2 * 160 * 160;
+
 /// The edge `hd` fits its views at for its 3D critic, which judges only the coarsest 16^3
 /// volumes: its fourth scale's, where a fit at the finest (126^3) would take several minutes.
 const HD_FIT_SIZE: usize = 45;
@@ -169,6 +173,7 @@ impl TrainConfig {
                 );
                 let mut hd = cpu_recipe(sizes, &HD_ITERATIONS);
                 hd.pyramid.fit_size = Some(HD_FIT_SIZE);
+                hd.schedule.reconstruction_pixels = Some(HD_RECONSTRUCTION_PIXELS);
                 Ok(arranged_and_sharp(hd))
             }
             "small" => {
@@ -502,12 +507,15 @@ mod tests {
             .all(|s| s.reconstruction_only * 4 == s.iterations));
         assert_eq!(hd.pyramid.fit_size, Some(45));
         assert_eq!(hd.fit_config().size, 45);
-        // small's recipe: everything but the sizes, the schedule and the fit's size.
+        assert_eq!(hd.schedule.reconstruction_pixels, Some(51_200));
+        // small's recipe: everything but the sizes, the schedule, the fit's size and the
+        // reconstruction's pixels.
         let mut resized = hd.clone();
         resized.preset = small.preset.clone();
         resized.pyramid = small.pyramid.clone();
         resized.schedule.scales = small.schedule.scales.clone();
         resized.schedule.scale_views = small.schedule.scale_views.clone();
+        resized.schedule.reconstruction_pixels = None;
         assert_eq!(resized, small);
     }
 
