@@ -89,7 +89,11 @@ fn main() {
     }
     if stones {
         let (mean, sd) = research::mean_and_sd(&inside);
-        println!("stone matter inside the ring: {:.2}% (sd {:.2}%)", 100.0 * mean, 100.0 * sd);
+        println!(
+            "stone matter inside the ring: {:.2}% (sd {:.2}%)",
+            100.0 * mean,
+            100.0 * sd
+        );
     }
     let (count, count_sd) = research::mean_and_sd(&counts);
     let (share, _) = research::mean_and_sd(&shares);
