@@ -1,9 +1,12 @@
 //! Objects (`scene_metrics::Objects`) of a run's scene, reconstruction and samples: the built-in
 //! scene's own layout baked at several grids (the truth), a fit of the views (the run's fitted
 //! volume when it has one), V* and generated scenes; per volume the number of objects, their
-//! volumes and the largest one's share of all object matter. Used for docs/journal/2026-12-hd.md.
+//! volumes and the largest one's share of all object matter. For the stones, the samples' share
+//! of stone matter inside the ring too (`research::stone_shares`, without the fit `layout_scores`
+//! makes). Used for docs/journal/2026-12-hd.md.
 //!
 //! `cargo run --release -p research --example object_counts -- RUN DATASET [SCENES]`
+//! (default 32 scenes, drawn as `volgen eval`'s seed 0 draws them)
 
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
@@ -37,7 +40,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let usage = "usage: object_counts RUN DATASET [SCENES]";
     let (run, dataset) = (args.first().expect(usage), args.get(1).expect(usage));
-    let scenes: usize = args.get(2).map_or(8, |a| a.parse().unwrap());
+    let scenes: usize = args.get(2).map_or(32, |a| a.parse().unwrap());
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
     let finest = *model.config().pyramid.volume_sizes.last().unwrap();
@@ -71,13 +74,26 @@ fn main() {
     let v_star = model.to_physical(&model.reconstruct().unwrap()).unwrap();
     describe("V*", &objects(&v_star), min_volume);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    let (mut counts, mut shares) = (Vec::new(), Vec::new());
+    let stones = source.is_some_and(|s| s.kind.name() == "stones");
+    let (mut counts, mut shares, mut inside) = (Vec::new(), Vec::new(), Vec::new());
     for i in 0..scenes {
         let raw = model.generate_random_from(&mut rng, 1).unwrap();
-        let found = objects(&model.to_physical(&raw).unwrap());
+        let volume = model.to_physical(&raw).unwrap();
+        let found = objects(&volume);
         describe(&format!("sample {i}"), &found, min_volume);
         counts.push(found.count(min_volume) as f64);
         shares.push(found.largest_share());
+        if stones {
+            inside.push(research::stone_shares(&volume).0);
+        }
+    }
+    if stones {
+        let (mean, sd) = research::mean_and_sd(&inside);
+        println!(
+            "stone matter inside the ring: {:.2}% (sd {:.2}%)",
+            100.0 * mean,
+            100.0 * sd
+        );
     }
     let (count, count_sd) = research::mean_and_sd(&counts);
     let (share, _) = research::mean_and_sd(&shares);

@@ -151,7 +151,7 @@ impl Objects {
             .into_iter()
             .map(|piece| describe(&piece, &values, [d, h, w]))
             .collect();
-        objects.sort_by(|a, b| b.voxels.cmp(&a.voxels));
+        objects.sort_by_key(|object| std::cmp::Reverse(object.voxels));
         Ok(Self { objects })
     }
 

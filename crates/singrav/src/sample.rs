@@ -364,10 +364,12 @@ impl SinGrav {
     }
 
     /// Colour renderings of the 3D pyramid as the model outputs them: doubled by G_N when it
-    /// is trained, clamped to [0, 1].
+    /// is trained, clamped to [0, 1], detached: G_N's weights are variables, so its output
+    /// would otherwise hold every activation of its pass for a backward that never comes
+    /// (about 0.4 GB per scene of four 320^2 views, which `volgen eval`'s 32 scenes kept).
     fn finish_views(&self, coarse: Tensor) -> Result<Tensor> {
         if self.has_upsampler() {
-            Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?)
+            Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?.detach())
         } else {
             Ok(coarse)
         }

@@ -219,6 +219,8 @@ fn hd() -> TrainConfig {
     );
     // The 3D critic judges the 16^3 volumes only: no need to fit the views at 126^3.
     hd.pyramid.fit_size = Some(45);
+    // As many pixels as two of its finest renderings: 8 views of them would hold 204,800.
+    hd.schedule.reconstruction_pixels = Some(2 * 160 * 160);
     hd
 }
 
@@ -486,12 +488,15 @@ mod tests {
             .all(|s| s.reconstruction_only * 4 == s.iterations));
         assert_eq!(hd.pyramid.fit_size, Some(45));
         assert_eq!(hd.fit_config().size, 45);
-        // small's recipe: everything but the sizes, the schedule and the fit's size.
+        assert_eq!(hd.schedule.reconstruction_pixels, Some(51_200));
+        // small's recipe: everything but the sizes, the schedule, the fit's size and the
+        // reconstruction's pixels.
         let mut resized = hd.clone();
         resized.preset = small.preset.clone();
         resized.pyramid = small.pyramid.clone();
         resized.schedule.scales = small.schedule.scales.clone();
         resized.schedule.scale_views = small.schedule.scale_views.clone();
+        resized.schedule.reconstruction_pixels = None;
         assert_eq!(resized, small);
     }
 
