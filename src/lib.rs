@@ -35,10 +35,10 @@ pub use volrender as render;
 pub use volume_fit as fit;
 pub use volume_mesh as mesh;
 
-/// The types most users need: every crate's own prelude (but patch-gan's and conv-kernels',
-/// which have none yet).
+/// The types most users need: every re-exported crate's own prelude.
 pub mod prelude {
     pub use csg_embed::prelude::*;
+    pub use patch_gan::prelude::*;
     pub use radiance_volume::prelude::*;
     pub use rgbd_dataset::prelude::*;
     pub use scene_metrics::prelude::*;

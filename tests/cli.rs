@@ -25,7 +25,11 @@ fn small_volume(dir: &Path) -> String {
 fn a_closed_pipe_ends_a_command_quietly() {
     let dir = tempfile::tempdir().unwrap();
     let vol = small_volume(dir.path());
-    for args in [vec!["info", vol.as_str()], vec!["help", "train"], vec!["--help"]] {
+    for args in [
+        vec!["info", vol.as_str()],
+        vec!["help", "train"],
+        vec!["--help"],
+    ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_volgen"))
             .args(&args)
             .stdout(Stdio::piped())

@@ -267,7 +267,14 @@ fn without_depth_no_depth_kind_is_asked_for() {
     assert!(err.contains("--depth-kind"), "{err}");
     ok(&fit(&["--no-depth"]));
     let train = |extra: &[&str]| {
-        let mut args = vec!["train", path(&data), "--preset", "micro", "--iterations", "1"];
+        let mut args = vec![
+            "train",
+            path(&data),
+            "--preset",
+            "micro",
+            "--iterations",
+            "1",
+        ];
         args.extend_from_slice(extra);
         volgen(&args)
     };

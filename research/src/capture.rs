@@ -9,7 +9,9 @@ use serde_json::Value;
 
 /// One camera: rotation (camera to world) and centre.
 pub struct Pose {
+    /// Rotation, camera to world.
     pub rotation: Matrix3<f64>,
+    /// The camera's centre in the world.
     pub centre: Vector3<f64>,
 }
 

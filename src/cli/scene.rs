@@ -34,7 +34,8 @@ pub struct SceneArgs {
 /// The built-in scenes as a command line takes them, each with what it is (`--help` lists
 /// them).
 pub fn built_in_scenes() -> impl clap::builder::TypedValueParser<Value = SceneKind> {
-    let names = SceneKind::ALL.map(|kind| clap::builder::PossibleValue::new(kind.name()).help(kind.about()));
+    let names = SceneKind::ALL
+        .map(|kind| clap::builder::PossibleValue::new(kind.name()).help(kind.about()));
     clap::builder::PossibleValuesParser::new(names)
         .try_map(|name: String| name.parse::<SceneKind>())
 }

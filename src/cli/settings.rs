@@ -43,6 +43,7 @@ impl Settings {
     }
 
     /// The configuration so far (the preset and the flags).
+    #[cfg(test)]
     pub fn config(&self) -> &TrainConfig {
         &self.config
     }

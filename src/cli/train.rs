@@ -90,7 +90,7 @@ pub struct TrainOptions {
     pub dense: bool,
     /// Weight of the colour-distribution loss of generated scenes at the 3D scales,
     /// `losses.colour_distribution` (sliced W2 between the pixel colours of a sample's rendering
-    /// and the real view's; default: the preset's). `--lambda-colour` before 2026-12-06.
+    /// and the real view's; default: the preset's). `--lambda-colour` is its old name.
     #[arg(long, value_name = "W", alias = "lambda-colour")]
     pub lambda_colour_distribution: Option<f64>,
     /// Views of the reconstruction loss per generator step at the 3D scales (default: the
@@ -624,7 +624,10 @@ mod tests {
     #[test]
     fn a_set_of_what_a_flag_gives_is_an_error_naming_both() {
         for (flag, setting) in [
-            ("--lambda-colour-distribution", "losses.colour_distribution=3"),
+            (
+                "--lambda-colour-distribution",
+                "losses.colour_distribution=3",
+            ),
             ("--lambda-colour", "losses.colour_distribution=3"),
             ("--seed", "run.seed=3"),
             ("--holdout", "run={}"),
@@ -648,12 +651,36 @@ mod tests {
     #[test]
     fn every_flag_changes_only_the_settings_it_names() {
         let given = flags(&[
-            "--preset", "small", "--scales", "3", "--no-swd", "--no-csg", "--no-depth",
-            "--no-opacity", "--dense", "--lambda-colour-distribution", "7",
-            "--reconstruction-views", "3", "--layers", "4", "--learning-rate", "0.01",
-            "--iterations", "9", "--seed", "5", "--lambda-fitted", "2",
-            "--lambda-volume-critic", "0.7", "--volume-critic-colour",
-            "--reconstruction-fit", "11", "--holdout", "3",
+            "--preset",
+            "small",
+            "--scales",
+            "3",
+            "--no-swd",
+            "--no-csg",
+            "--no-depth",
+            "--no-opacity",
+            "--dense",
+            "--lambda-colour-distribution",
+            "7",
+            "--reconstruction-views",
+            "3",
+            "--layers",
+            "4",
+            "--learning-rate",
+            "0.01",
+            "--iterations",
+            "9",
+            "--seed",
+            "5",
+            "--lambda-fitted",
+            "2",
+            "--lambda-volume-critic",
+            "0.7",
+            "--volume-critic-colour",
+            "--reconstruction-fit",
+            "11",
+            "--holdout",
+            "3",
         ]);
         let preset = TrainConfig::preset("small").unwrap();
         let changed = singrav::config::settings_that_differ(&preset, given.config());

@@ -78,6 +78,8 @@
 //! f32 within a stated factor of its rounding. A CPU without AVX2 runs the portable paths in
 //! the same tests.
 
+// The workspace denies `unsafe` code; this crate is where the convolutions' lives (above).
+#![allow(unsafe_code)]
 #![deny(unsafe_op_in_unsafe_fn)]
 #![warn(missing_docs, clippy::undocumented_unsafe_blocks)]
 
@@ -93,3 +95,8 @@ pub mod winograd;
 pub use element::Element;
 pub use geometry::Geometry;
 pub use im2col::{Chunk, Columns};
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

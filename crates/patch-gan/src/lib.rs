@@ -83,3 +83,16 @@ pub use generator::{Generator3d, Generator3dConfig};
 pub use norm::{batch_norm3d, leaky_relu, BatchNorm3d, InstanceNorm2d, LEAKY_SLOPE, NORM_EPS};
 pub use upsampler::{upsample_bilinear2x, Upsampler2d, Upsampler2dConfig};
 pub use wgan::{critic_loss, generator_loss, gradient_penalty, GradientNorm, GradientPenalty};
+
+/// The types most users of this crate need, for `use patch_gan::prelude::*;`.
+pub mod prelude {
+    pub use crate::{
+        Conv2d, Conv3d, ConvConfig, Generator3d, Generator3dConfig, PatchDiscriminator,
+        PatchDiscriminator2d, PatchDiscriminator3d, Upsampler2d,
+    };
+}
+
+/// The README's examples, compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -38,12 +38,17 @@ pub enum Lens {
     /// `p1, p2`. COLMAP's SIMPLE_RADIAL (`k1`), RADIAL (`k1, k2`) and OPENCV (`k1, k2, p1,
     /// p2`); nerfstudio's OPENCV (`k1` to `k4`, `p1, p2`).
     BrownConrady {
+        /// `k1` to `k4` (0 where the model has fewer).
         radial: [f64; 4],
+        /// `p1, p2`.
         tangential: [f64; 2],
     },
     /// The equidistant fisheye (COLMAP's and nerfstudio's OPENCV_FISHEYE): the angle `theta`
     /// from the axis lands at radius `theta (1 + k1 theta^2 + ... + k4 theta^8)`.
-    Fisheye { radial: [f64; 4] },
+    Fisheye {
+        /// `k1` to `k4`.
+        radial: [f64; 4],
+    },
 }
 
 impl Lens {

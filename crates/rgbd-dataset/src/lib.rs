@@ -474,7 +474,9 @@ fn transforms_file(path: &Path) -> PathBuf {
 /// The types most users of this crate need, for `use rgbd_dataset::prelude::*;`.
 pub mod prelude {
     pub use crate::scenes::{Scene, SceneKind};
-    pub use crate::{write_dataset, Bounds, Dataset, DatasetSpec, DepthKind, LoadOptions, SceneBounds};
+    pub use crate::{
+        write_dataset, Bounds, Dataset, DatasetSpec, DepthKind, LoadOptions, SceneBounds,
+    };
 }
 
 /// The README's examples, compiled and run as doc tests.

@@ -147,10 +147,11 @@ pub(super) fn load(transforms: &Path, options: &LoadOptions) -> Result<Dataset> 
         names.push(at.name);
     }
     let (width, height) = size.unwrap_or_default();
-    let mut cameras: Vec<Camera> = volrender::transforms_from_json(&root, &path, Some((width, height)))?
-        .into_iter()
-        .map(|frame| frame.camera)
-        .collect();
+    let mut cameras: Vec<Camera> =
+        volrender::transforms_from_json(&root, &path, Some((width, height)))?
+            .into_iter()
+            .map(|frame| frame.camera)
+            .collect();
     let mut pixels = Vec::with_capacity(raw.len());
     let mut undistortions = Vec::new();
     for (((mut rgba, depth_path, depth, lens), camera), name) in

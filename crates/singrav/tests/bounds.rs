@@ -307,3 +307,40 @@ fn finer_physical_volumes_render_as_the_model_does() {
     let physical = rms_errors(false, &[1, 3]);
     assert!(physical.iter().all(|&e| e < 1e-5), "{physical:?}");
 }
+
+/// Automatic bounds from the library alone (no CLI): a scene beyond the model's cube is
+/// reported, `auto` resolves to the box its depth maps show, and a run placed by it trains.
+#[test]
+fn auto_bounds_place_a_moved_scene_from_the_library() {
+    use rgbd_dataset::Bounds;
+    use singrav::train::{beyond_the_cube, Control, RunOptions, Trainer};
+
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, moved) = (tmp.path().join("a"), tmp.path().join("b"));
+    original_and_moved(&dir, &moved);
+    let here = Dataset::load(&dir, [1.0; 3]).unwrap();
+    let there = Dataset::load(&moved, [1.0; 3]).unwrap();
+    assert!(beyond_the_cube(&here).is_none());
+    let seen = beyond_the_cube(&there).expect("the moved scene is beyond the cube");
+    let auto = Bounds::Auto.resolve(&there).unwrap();
+    assert_eq!(auto, seen);
+    assert_eq!(auto, there.auto_bounds().unwrap());
+    let given = Bounds::Box(moved_box(-1.0, 1.0));
+    assert_eq!(given.resolve(&there).unwrap(), moved_box(-1.0, 1.0));
+
+    let config = singrav::TrainConfig::preset("micro")
+        .unwrap()
+        .with(|c| c.run.bounds = Some(auto));
+    // The coarsest scale trains on the scene moved into the model's cube.
+    let mut trainer = Trainer::new(
+        &config,
+        &there,
+        &tmp.path().join("run"),
+        &RunOptions::default(),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let control = trainer.train_scale(&mut |_| Control::Continue).unwrap();
+    assert_eq!(control, Control::Continue);
+    assert_eq!(trainer.state().scale, 2);
+}

@@ -390,9 +390,12 @@ fn a_holdout_run_trains_exactly_as_a_run_on_the_training_views_alone() {
         &checkpoint_tensors(&tmp.path().join("held")),
         &checkpoint_tensors(&tmp.path().join("subset")),
     );
-    let recorded = Checkpoint::load(&RunDir::new(tmp.path().join("held")).checkpoint(), &Device::Cpu)
-        .unwrap()
-        .config;
+    let recorded = Checkpoint::load(
+        &RunDir::new(tmp.path().join("held")).checkpoint(),
+        &Device::Cpu,
+    )
+    .unwrap()
+    .config;
     assert_eq!(recorded.run.holdout, Some(3));
     let bad = plain.with(|c| {
         c.run.holdout = Some(1);
@@ -1228,4 +1231,71 @@ fn a_finished_run_fits_its_reconstruction_to_the_views_with_the_networks_frozen(
         err.contains("reconstruction detail") && err.contains(&format!("{s}, {s}, {s}]")),
         "{err}"
     );
+}
+
+/// Depth from a fit of the views, from the library alone (no CLI): `prepare` fits the views
+/// without depth into the run's directory, the run trains on the depth that fit renders, and a
+/// resumed run finds the fit rather than making it again.
+#[test]
+fn depth_from_a_fit_is_made_kept_and_reused_by_the_library() {
+    use rgbd_dataset::{DepthKind, LoadOptions};
+    use singrav::train::{prepare, RunFit, Trainer};
+
+    let tmp = tempfile::tempdir().unwrap();
+    dataset(&tmp.path().join("data"));
+    // Photos without depth maps, as a capture of one's own has them.
+    let options = LoadOptions {
+        depth_kind: Some(DepthKind::None),
+        ..LoadOptions::default()
+    };
+    let photos = Dataset::load_with(&tmp.path().join("data"), &options).unwrap();
+    assert_eq!(photos.depth_kind(), DepthKind::None);
+    let config = micro().with(|c| c.run.depth_from_fit = true);
+    assert!(!config.reads_depth_maps());
+    let run = RunDir::new(tmp.path().join("run"));
+    let options = RunOptions {
+        depth_fit_steps: Some(4),
+        ..RunOptions::default()
+    };
+    let mut fits = Vec::new();
+    let inputs = prepare(
+        &config,
+        &photos,
+        &run,
+        &options,
+        &Device::Cpu,
+        &mut |fit, _| {
+            fits.push(fit);
+        },
+    )
+    .unwrap();
+    assert!(!fits.is_empty() && fits.iter().all(|&fit| fit == RunFit::DepthSource));
+    assert_eq!(inputs.made.len(), 1);
+    assert_eq!(inputs.made[0].fit, RunFit::DepthSource);
+    assert_eq!(inputs.made[0].path, run.depth_fit());
+    assert!(run.depth_fit().is_file());
+    assert_ne!(inputs.dataset.depth_kind(), DepthKind::None);
+    let coverage = inputs.depth_coverage.unwrap();
+    assert!(coverage.foreground > 0);
+    let trainer = Trainer::from_inputs(&config, inputs, run.root(), &Device::Cpu).unwrap();
+    let outcome = trainer.run(&mut |_| Control::Continue).unwrap();
+    assert!(matches!(outcome, TrainOutcome::Finished(_)));
+    assert!(run.log().is_file() && run.scale_picture(1).is_file());
+
+    // Resumed, the run's own fit is used: nothing is fitted again.
+    let resumed = RunOptions {
+        resume: true,
+        ..options
+    };
+    let again = prepare(
+        &config,
+        &photos,
+        &run,
+        &resumed,
+        &Device::Cpu,
+        &mut |_, _| panic!("fitted again"),
+    )
+    .unwrap();
+    assert!(again.made.is_empty());
+    assert_eq!(again.options.depth_fit, Some(run.depth_fit()));
 }

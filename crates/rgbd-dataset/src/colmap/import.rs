@@ -32,10 +32,15 @@ pub struct ImportOptions {
 /// What [`import`] wrote.
 #[derive(Debug, Clone)]
 pub struct ImportSummary {
+    /// The `transforms.json` written.
     pub transforms: PathBuf,
+    /// Frames written.
     pub frames: usize,
+    /// Width of the photos, pixels.
     pub width: u32,
+    /// Height of the photos, pixels.
     pub height: u32,
+    /// How the capture was placed in the model's cube.
     pub placement: Placement,
     /// The cameras whose photos were undistorted (lens models other than the pinholes).
     pub undistorted: Vec<UndistortedCamera>,
@@ -44,7 +49,9 @@ pub struct ImportSummary {
 /// A camera whose photos [`import`] undistorted.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UndistortedCamera {
+    /// The camera's id in the reconstruction.
     pub id: u32,
+    /// Its lens model.
     pub model: CameraModel,
     /// `fx, fy, cx, cy` of the photos' camera, pixels.
     pub photo: [f64; 4],

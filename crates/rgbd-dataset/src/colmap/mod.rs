@@ -123,9 +123,13 @@ impl fmt::Display for CameraModel {
 /// One camera (intrinsics) of a reconstruction.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColmapCamera {
+    /// The camera's id.
     pub id: u32,
+    /// Its lens model.
     pub model: CameraModel,
+    /// Image width, pixels.
     pub width: u64,
+    /// Image height, pixels.
     pub height: u64,
     /// The model's parameters in COLMAP's order ([`CameraModel`] lists them).
     pub params: Vec<f64>,
@@ -134,11 +138,13 @@ pub struct ColmapCamera {
 /// One registered image: its pose (world to camera, COLMAP's convention) and camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColmapImage {
+    /// The image's id.
     pub id: u32,
     /// The rotation world to camera as a unit quaternion `(w, x, y, z)`.
     pub rotation: [f64; 4],
     /// The translation world to camera: a world point `X` is `R X + t` in the camera's frame.
     pub translation: [f64; 3],
+    /// The id of the camera ([`ColmapCamera`]) that took it.
     pub camera_id: u32,
     /// The image file's name, relative to the images directory the reconstruction used.
     pub name: String,
@@ -147,8 +153,11 @@ pub struct ColmapImage {
 /// One triangulated point.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColmapPoint {
+    /// The point's id.
     pub id: u64,
+    /// Its position in the reconstruction's frame.
     pub position: [f64; 3],
+    /// Its colour, 8-bit RGB.
     pub colour: [u8; 3],
     /// Mean reprojection error in pixels.
     pub error: f64,
@@ -159,8 +168,11 @@ pub struct ColmapPoint {
 /// A sparse reconstruction: cameras by id, registered images in file order, points.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ColmapModel {
+    /// Cameras by id.
     pub cameras: BTreeMap<u32, ColmapCamera>,
+    /// Registered images, in file order.
     pub images: Vec<ColmapImage>,
+    /// Triangulated points.
     pub points: Vec<ColmapPoint>,
 }
 

@@ -37,9 +37,11 @@ pub struct ImportOptions {
 pub struct ImportSummary {
     /// The placed capture's `transforms.json`.
     pub transforms: PathBuf,
+    /// Frames written.
     pub frames: usize,
     /// The point cloud placing read, and its number of points.
     pub points: (PathBuf, usize),
+    /// How the capture was placed in the model's cube.
     pub placement: Placement,
 }
 

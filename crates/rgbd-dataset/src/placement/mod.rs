@@ -57,8 +57,11 @@ const FILLED_HALF_SIDE: f64 = 1.0 / 1.1;
 /// central 98% up and down.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
+    /// Turns the capture's up direction to +z.
     pub rotation: DMat3,
+    /// The middle of the scene's box, in the capture's frame.
     pub centre: DVec3,
+    /// Scale from the capture's lengths to the dataset's.
     pub scale: f64,
     /// Where the up direction the rotation turns to +z came from ([`up_direction`]).
     pub up: UpFrom,

@@ -126,7 +126,14 @@ fn paper() -> TrainConfig {
             d_steps: 3,
             g_steps: 3,
             views_per_step: 1,
-            scale_views: Some(table_views(&[(6, 2), (6, 2), (6, 2), (5, 1), (2, 1), (2, 1)])),
+            scale_views: Some(table_views(&[
+                (6, 2),
+                (6, 2),
+                (6, 2),
+                (5, 1),
+                (2, 1),
+                (2, 1),
+            ])),
             learning_rate: 5e-4,
             betas: (0.9, 0.999),
             reconstruction_fit_steps: 0,
@@ -373,7 +380,11 @@ mod tests {
                 geometric(volume as f64, 4.0 / 3.0, n),
                 "{name}"
             );
-            assert_eq!(pyramid.image_sizes, geometric(image as f64, 1.5, n), "{name}");
+            assert_eq!(
+                pyramid.image_sizes,
+                geometric(image as f64, 1.5, n),
+                "{name}"
+            );
         }
         // `small`: `tiny`'s 16^3 first, then the 4/3 ramp from 24^3.
         let small = TrainConfig::preset("small").unwrap().pyramid;

@@ -116,7 +116,12 @@ impl LossTerm {
         Self::ALL
             .into_iter()
             .find(|term| term.key() == key)
-            .or_else(|| RETIRED_KEYS.iter().find(|(old, _)| *old == key).map(|(_, t)| *t))
+            .or_else(|| {
+                RETIRED_KEYS
+                    .iter()
+                    .find(|(old, _)| *old == key)
+                    .map(|(_, t)| *t)
+            })
     }
 
     fn index(self) -> usize {
@@ -297,9 +302,7 @@ mod tests {
         losses.set(LossTerm::Rgb, 0.25);
         losses.set(LossTerm::Critic, -1.5);
         let json = serde_json::to_string(&losses).unwrap();
-        assert!(
-            json.starts_with(r#"{"critic":-1.5,"penalty":null,"adversarial":null,"rgb":0.25"#)
-        );
+        assert!(json.starts_with(r#"{"critic":-1.5,"penalty":null,"adversarial":null,"rgb":0.25"#));
         assert!(json.ends_with(r#""volume_adversarial":null}"#), "{json}");
         let keys: Vec<&str> = LossTerm::ALL.iter().map(|t| t.key()).collect();
         let mut unique = keys.clone();

@@ -132,16 +132,18 @@ pub fn prepare<'a>(
         (Cow::Borrowed(dataset), None)
     };
     let fitted = if config.compares_with_fit() {
-        Some(match settled_fit(RunFit::Target, config, run, &mut options)? {
-            Some(volume) => volume,
-            None => {
-                let steps = options.fit_steps;
-                let fitted = fit_training_target(config, &dataset, steps, &mut |p| {
-                    observer(RunFit::Target, p);
-                })?;
-                keep(RunFit::Target, fitted, run, &mut made)?
-            }
-        })
+        Some(
+            match settled_fit(RunFit::Target, config, run, &mut options)? {
+                Some(volume) => volume,
+                None => {
+                    let steps = options.fit_steps;
+                    let fitted = fit_training_target(config, &dataset, steps, &mut |p| {
+                        observer(RunFit::Target, p);
+                    })?;
+                    keep(RunFit::Target, fitted, run, &mut made)?
+                }
+            },
+        )
     } else if let Some(path) = &options.fitted_volume {
         return Err(invalid(
             "fitted volume",

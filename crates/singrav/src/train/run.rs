@@ -174,10 +174,7 @@ impl<'a> Trainer<'a> {
 
     /// Trains every scale left ([`Trainer::train_scale`]), then [`Trainer::finish`]; what
     /// [`train`] does after [`Trainer::new`].
-    pub fn run(
-        mut self,
-        observer: &mut dyn FnMut(&Progress) -> Control,
-    ) -> Result<TrainOutcome> {
+    pub fn run(mut self, observer: &mut dyn FnMut(&Progress) -> Control) -> Result<TrainOutcome> {
         while !self.scales_done() {
             if self.train_scale(observer)? == Control::Stop {
                 return Ok(TrainOutcome::Stopped);
