@@ -1,3 +1,6 @@
+// Setting candle's environment switches (`std::env::set_var`) is `unsafe`; nothing else is.
+#![allow(unsafe_code)]
+
 mod benchmarks;
 
 criterion::criterion_main!(

@@ -25,6 +25,9 @@
 //! arithmetic of one step (2 multiply-adds per weight tap per output voxel, counted at the
 //! minimum: see `step_gflop`), `gflops` = `gflop / seconds`.
 
+// Setting the environment (`std::env::set_var`) is `unsafe`; nothing else here is.
+#![allow(unsafe_code)]
+
 use std::time::Instant;
 
 use candle_core::{DType, Device, ModuleT, Tensor};

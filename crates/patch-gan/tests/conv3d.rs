@@ -1,5 +1,8 @@
 //! Conv3d against a direct float64 sum, and its gradients against finite differences.
 
+// Loading weights by memory map is `unsafe` (the file must not change meanwhile).
+#![allow(unsafe_code)]
+
 use candle_core::{DType, Device, Module, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{conv3d, functional, Conv3d, ConvConfig};

@@ -4,6 +4,9 @@
 //! Tests that differentiate twice set `CANDLE_GRAD_DO_NOT_DETACH`; candle reads it once per
 //! thread and every test runs on its own thread.
 
+// Setting candle's environment switch (`std::env::set_var`) is `unsafe`.
+#![allow(unsafe_code)]
+
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{batch_norm3d, bias_leaky_relu, leaky_relu, NORM_EPS};

@@ -1,6 +1,9 @@
 //! Shapes, checkpoint names and receptive fields of the paper's networks (tables "generators",
 //! "G_N" and "discriminators").
 
+// Loading weights by memory map is `unsafe` (the file must not change meanwhile).
+#![allow(unsafe_code)]
+
 use std::collections::HashMap;
 
 use candle_core::{DType, Device, Module, ModuleT, Tensor};

@@ -4,6 +4,9 @@
 //! Every test sets `CANDLE_GRAD_DO_NOT_DETACH` first: candle reads it once per thread, and each
 //! test runs on its own thread.
 
+// Setting candle's environment switch (`std::env::set_var`) is `unsafe`.
+#![allow(unsafe_code)]
+
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use patch_gan::{
