@@ -1,25 +1,40 @@
 //! Resampling between resolutions over the same box: trilinear between cell centres, applied as
 //! three separable interpolation matrices, so it runs on any device and is differentiable.
 
+use std::ops::Range;
+
 use candle_core::{Device, Tensor};
 
+use crate::activation::Activation;
 use crate::error::{invalid, Result};
-use crate::grid::GridDims;
+use crate::grid::{GridDims, VoxelGrid};
 use crate::sample::AxisLerp;
+use crate::source::{check_channels, Region, VolumeSource};
 use crate::volume::RadianceVolume;
 
-/// Returns the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis of `n_in`
-/// cells at the centres of `n_out` cells over the same extent (edge-clamped).
-fn interpolation_matrix(n_in: usize, n_out: usize, device: &Device) -> Result<Tensor> {
-    let mut m = vec![0f32; n_out * n_in];
+/// The rows `rows` of the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis
+/// of `n_in` cells at the centres of `n_out` cells over the same extent (edge-clamped), cut to
+/// the input cells they use: the matrix `(rows.len(), window.len())` and `window`.
+fn interpolation_rows(
+    n_in: usize,
+    n_out: usize,
+    rows: Range<usize>,
+    device: &Device,
+) -> Result<(Tensor, Range<usize>)> {
     let ratio = n_in as f32 / n_out as f32;
-    for (j, row) in m.chunks_mut(n_in).enumerate() {
-        // Centre of output cell j, in input index coordinates.
-        let lerp = AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in);
-        row[lerp.i0] += 1.0 - lerp.t;
-        row[lerp.i1] += lerp.t;
+    // Centre of output cell j, in input index coordinates.
+    let lerps: Vec<AxisLerp> = rows
+        .map(|j| AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in))
+        .collect();
+    let first = lerps.iter().map(|l| l.i0).min().unwrap_or(0);
+    let window = first..lerps.iter().map(|l| l.i1 + 1).max().unwrap_or(first);
+    let mut m = vec![0f32; lerps.len() * window.len()];
+    for (row, lerp) in m.chunks_mut(window.len()).zip(&lerps) {
+        row[lerp.i0 - first] += 1.0 - lerp.t;
+        row[lerp.i1 - first] += lerp.t;
     }
-    Ok(Tensor::from_vec(m, (n_out, n_in), device)?)
+    let matrix = Tensor::from_vec(m, (lerps.len(), window.len()), device)?;
+    Ok((matrix, window))
 }
 
 /// Interpolates dimension `dim` of `x` from its size to `n_out`.
@@ -28,7 +43,14 @@ fn resample_dim(x: &Tensor, dim: usize, n_out: usize) -> Result<Tensor> {
     if n_in == n_out {
         return Ok(x.clone());
     }
-    let m = interpolation_matrix(n_in, n_out, x.device())?.to_dtype(x.dtype())?;
+    let (m, window) = interpolation_rows(n_in, n_out, 0..n_out, x.device())?;
+    let x = x.narrow(dim, window.start, window.len())?;
+    apply_along(&x, dim, &m.to_dtype(x.dtype())?)
+}
+
+/// Multiplies dimension `dim` of `x` by `m` `(n_out, n_in)`: `y[.., j, ..] = sum_i m[j, i] x[.., i, ..]`.
+fn apply_along(x: &Tensor, dim: usize, m: &Tensor) -> Result<Tensor> {
+    let (n_out, n_in) = m.dims2()?;
     let last = x.rank() - 1;
     let moved = x.transpose(dim, last)?.contiguous()?;
     let mut shape = moved.dims().to_vec();
@@ -91,5 +113,124 @@ impl RadianceVolume {
         let scale = |n: usize| ((n as f32 * factor).round() as usize).max(1);
         let d = self.dims();
         self.resample(GridDims::new(scale(d.d), scale(d.h), scale(d.w)))
+    }
+}
+
+/// A volume resampled to another grid over the same box, computed block by block when read
+/// ([`VolumeSource`]): every cell holds the trilinear interpolation of the volume's cell centres
+/// at its own centre, as [`RadianceVolume::resample`] computes it, and, with
+/// [`Resampled::with_density_activation`], channel 0 is then mapped through the activation's
+/// density (post-activated density: interpolate raw density, then activate).
+///
+/// A block reads only the cells of the volume it interpolates from, so writers can stream a
+/// volume 27 times larger than the source (`factor` 3) through a small buffer.
+///
+/// ```
+/// use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume, Region, Resampled, VolumeSource};
+/// let v = RadianceVolume::from_fn(GridDims::cube(4), Aabb::CUBE, 4, |p, out| {
+///     out.copy_from_slice(&[p.x, 0.5, 0.5, 0.5]);
+/// })?;
+/// let fine = Resampled::finer(v, 3)?.with_density_activation(Activation::default());
+/// assert_eq!(fine.dims(), GridDims::cube(12));
+/// // Fine cell x = 4 sits on the centre of coarse cell 1 (x = -0.25): softplus(-0.25).
+/// let sigma = fine.read_block(0..1, &Region { z: 0..1, y: 0..1, x: 4..5 })?[0];
+/// assert!((sigma - (1.0 + (-0.25f32).exp()).ln()).abs() < 1e-6);
+/// # Ok::<(), radiance_volume::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct Resampled {
+    volume: RadianceVolume,
+    dims: GridDims,
+    density: Option<Activation>,
+}
+
+impl Resampled {
+    /// `volume` on a grid of `dims` cells over its box (a volume's clone shares its memory).
+    pub fn new(volume: RadianceVolume, dims: GridDims) -> Result<Self> {
+        dims.validate()?;
+        Ok(Self {
+            volume,
+            dims,
+            density: None,
+        })
+    }
+
+    /// `volume` on a grid `factor` times finer along every axis (`factor >= 1`).
+    pub fn finer(volume: RadianceVolume, factor: usize) -> Result<Self> {
+        let d = volume.dims();
+        Self::new(
+            volume,
+            GridDims::new(d.d * factor, d.h * factor, d.w * factor),
+        )
+    }
+
+    /// Maps interpolated channel 0 (raw density) through `activation`'s density.
+    #[must_use]
+    pub fn with_density_activation(self, activation: Activation) -> Self {
+        Self {
+            density: Some(activation),
+            ..self
+        }
+    }
+
+    /// Computes the whole volume at once (as much memory as its cells need).
+    pub fn to_volume(&self) -> Result<RadianceVolume> {
+        let values = self.read_block(0..self.channel_count(), &Region::all(self.dims))?;
+        let d = self.dims;
+        let shape = (self.channel_count(), d.d, d.h, d.w);
+        let data = Tensor::from_vec(values, shape, self.volume.tensor().device())?;
+        self.volume.with_tensor(data)
+    }
+}
+
+impl VolumeSource for Resampled {
+    fn grid(&self) -> VoxelGrid {
+        VoxelGrid {
+            aabb: self.volume.aabb(),
+            dims: self.dims,
+        }
+    }
+
+    fn channel_names(&self) -> &[String] {
+        self.volume.channel_names()
+    }
+
+    fn read_block(&self, channels: Range<usize>, region: &Region) -> Result<Vec<f32>> {
+        region.check(self.dims)?;
+        check_channels(&channels, self.channel_count())?;
+        let coarse = self.volume.dims();
+        let mut x = self
+            .volume
+            .tensor()
+            .narrow(0, channels.start, channels.len())?;
+        // First the volume is cut to the cells the block reads along every axis, then each
+        // axis (x, then y, then z) is interpolated by the rows of the matrix the block needs:
+        // a plane of a 3x finer grid reads 2 planes of the volume, not all of it.
+        let mut rows_of = Vec::with_capacity(3);
+        for (dim, n_in, n_out, rows) in [
+            (3, coarse.w, self.dims.w, region.x.clone()),
+            (2, coarse.h, self.dims.h, region.y.clone()),
+            (1, coarse.d, self.dims.d, region.z.clone()),
+        ] {
+            x = if n_in == n_out {
+                // The same cells: copied, not interpolated (exact even next to infinities).
+                x.narrow(dim, rows.start, rows.len())?
+            } else {
+                let (m, window) = interpolation_rows(n_in, n_out, rows, x.device())?;
+                rows_of.push((dim, m));
+                x.narrow(dim, window.start, window.len())?
+            };
+        }
+        for (dim, m) in rows_of {
+            x = apply_along(&x, dim, &m)?;
+        }
+        if let (Some(activation), 0) = (self.density, channels.start) {
+            let sigma = activation.apply_density(&x.narrow(0, 0, 1)?)?;
+            x = match channels.len() {
+                1 => sigma,
+                n => Tensor::cat(&[&sigma, &x.narrow(0, 1, n - 1)?], 0)?,
+            };
+        }
+        Ok(x.flatten_all()?.to_vec1()?)
     }
 }
