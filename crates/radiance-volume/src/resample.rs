@@ -4,6 +4,7 @@
 use std::ops::Range;
 
 use candle_core::{Device, Tensor};
+use rayon::prelude::*;
 
 use crate::activation::Activation;
 use crate::error::{invalid, Result};
@@ -12,29 +13,18 @@ use crate::sample::AxisLerp;
 use crate::source::{check_channels, Region, VolumeSource};
 use crate::volume::RadianceVolume;
 
-/// The rows `rows` of the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis
-/// of `n_in` cells at the centres of `n_out` cells over the same extent (edge-clamped), cut to
-/// the input cells they use: the matrix `(rows.len(), window.len())` and `window`.
-fn interpolation_rows(
-    n_in: usize,
-    n_out: usize,
-    rows: Range<usize>,
-    device: &Device,
-) -> Result<(Tensor, Range<usize>)> {
+/// Returns the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis of `n_in`
+/// cells at the centres of `n_out` cells over the same extent (edge-clamped).
+fn interpolation_matrix(n_in: usize, n_out: usize, device: &Device) -> Result<Tensor> {
+    let mut m = vec![0f32; n_out * n_in];
     let ratio = n_in as f32 / n_out as f32;
-    // Centre of output cell j, in input index coordinates.
-    let lerps: Vec<AxisLerp> = rows
-        .map(|j| AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in))
-        .collect();
-    let first = lerps.iter().map(|l| l.i0).min().unwrap_or(0);
-    let window = first..lerps.iter().map(|l| l.i1 + 1).max().unwrap_or(first);
-    let mut m = vec![0f32; lerps.len() * window.len()];
-    for (row, lerp) in m.chunks_mut(window.len()).zip(&lerps) {
-        row[lerp.i0 - first] += 1.0 - lerp.t;
-        row[lerp.i1 - first] += lerp.t;
+    for (j, row) in m.chunks_mut(n_in).enumerate() {
+        // Centre of output cell j, in input index coordinates.
+        let lerp = AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in);
+        row[lerp.i0] += 1.0 - lerp.t;
+        row[lerp.i1] += lerp.t;
     }
-    let matrix = Tensor::from_vec(m, (lerps.len(), window.len()), device)?;
-    Ok((matrix, window))
+    Ok(Tensor::from_vec(m, (n_out, n_in), device)?)
 }
 
 /// Interpolates dimension `dim` of `x` from its size to `n_out`.
@@ -43,14 +33,7 @@ fn resample_dim(x: &Tensor, dim: usize, n_out: usize) -> Result<Tensor> {
     if n_in == n_out {
         return Ok(x.clone());
     }
-    let (m, window) = interpolation_rows(n_in, n_out, 0..n_out, x.device())?;
-    let x = x.narrow(dim, window.start, window.len())?;
-    apply_along(&x, dim, &m.to_dtype(x.dtype())?)
-}
-
-/// Multiplies dimension `dim` of `x` by `m` `(n_out, n_in)`: `y[.., j, ..] = sum_i m[j, i] x[.., i, ..]`.
-fn apply_along(x: &Tensor, dim: usize, m: &Tensor) -> Result<Tensor> {
-    let (n_out, n_in) = m.dims2()?;
+    let m = interpolation_matrix(n_in, n_out, x.device())?.to_dtype(x.dtype())?;
     let last = x.rank() - 1;
     let moved = x.transpose(dim, last)?.contiguous()?;
     let mut shape = moved.dims().to_vec();
@@ -118,7 +101,10 @@ impl RadianceVolume {
 
 /// A volume resampled to another grid over the same box, computed block by block when read
 /// ([`VolumeSource`]): every cell holds the trilinear interpolation of the volume's cell centres
-/// at its own centre, as [`RadianceVolume::resample`] computes it, and, with
+/// at its own centre, with [`RadianceVolume::resample`]'s weights (the same values to float
+/// rounding: that one multiplies matrices, this one computes each cell alone, so that a cell
+/// gets the same bits in blocks of any shape and a file streamed block by block is the file of
+/// the whole), and, with
 /// [`Resampled::with_density_activation`], channel 0 is then mapped through the activation's
 /// density (post-activated density: interpolate raw density, then activate).
 ///
@@ -199,38 +185,69 @@ impl VolumeSource for Resampled {
         region.check(self.dims)?;
         check_channels(&channels, self.channel_count())?;
         let coarse = self.volume.dims();
-        let mut x = self
-            .volume
-            .tensor()
-            .narrow(0, channels.start, channels.len())?;
-        // First the volume is cut to the cells the block reads along every axis, then each
-        // axis (x, then y, then z) is interpolated by the rows of the matrix the block needs:
-        // a plane of a 3x finer grid reads 2 planes of the volume, not all of it.
-        let mut rows_of = Vec::with_capacity(3);
-        for (dim, n_in, n_out, rows) in [
-            (3, coarse.w, self.dims.w, region.x.clone()),
-            (2, coarse.h, self.dims.h, region.y.clone()),
-            (1, coarse.d, self.dims.d, region.z.clone()),
-        ] {
-            x = if n_in == n_out {
-                // The same cells: copied, not interpolated (exact even next to infinities).
-                x.narrow(dim, rows.start, rows.len())?
-            } else {
-                let (m, window) = interpolation_rows(n_in, n_out, rows, x.device())?;
-                rows_of.push((dim, m));
-                x.narrow(dim, window.start, window.len())?
-            };
-        }
-        for (dim, m) in rows_of {
-            x = apply_along(&x, dim, &m)?;
-        }
+        let lerps = [
+            axis_lerps(coarse.w, self.dims.w, region.x.clone()),
+            axis_lerps(coarse.h, self.dims.h, region.y.clone()),
+            axis_lerps(coarse.d, self.dims.d, region.z.clone()),
+        ];
+        let out_dims = region.dims();
+        let plane = out_dims.h * out_dims.w;
+        let mut out = vec![0f32; channels.len() * out_dims.voxel_count()];
+        self.volume.with_values(|values| {
+            out.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+                let (c, z) = (channels.start + i / out_dims.d, i % out_dims.d);
+                let channel = &values[c * coarse.voxel_count()..][..coarse.voxel_count()];
+                interpolate_plane(channel, coarse, &lerps, z, dst);
+            });
+        })?;
         if let (Some(activation), 0) = (self.density, channels.start) {
-            let sigma = activation.apply_density(&x.narrow(0, 0, 1)?)?;
-            x = match channels.len() {
-                1 => sigma,
-                n => Tensor::cat(&[&sigma, &x.narrow(0, 1, n - 1)?], 0)?,
-            };
+            let n = out_dims.voxel_count();
+            let sigma = Tensor::from_slice(&out[..n], n, &Device::Cpu)?;
+            let sigma: Vec<f32> = activation.apply_density(&sigma)?.to_vec1()?;
+            out[..n].copy_from_slice(&sigma);
         }
-        Ok(x.flatten_all()?.to_vec1()?)
+        Ok(out)
+    }
+}
+
+/// The trilinear taps of output cells `rows` on an axis of `n_out` cells over `n_in` input
+/// cells (cell-centred, edge-clamped): the same weights as [`interpolation_matrix`]'s rows.
+fn axis_lerps(n_in: usize, n_out: usize, rows: Range<usize>) -> Vec<AxisLerp> {
+    let ratio = n_in as f32 / n_out as f32;
+    rows.map(|j| AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in))
+        .collect()
+}
+
+/// `a (1 - t) + b t`, and exactly `a` at `t = 0` (a cell on an input centre is a copy of it,
+/// even beside an infinity).
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    if t == 0.0 {
+        a
+    } else {
+        a * (1.0 - t) + b * t
+    }
+}
+
+/// Fills `dst` (one output plane, `(y, x)` row-major) with the interpolation of one channel
+/// `(D, H, W)` of `dims` at output plane `z` of the block whose taps `[x, y, z]` are `lerps`:
+/// along x first, then y, then z, each output value computed alone in that order, so a voxel
+/// gets the same bits in a block of any shape.
+fn interpolate_plane(
+    channel: &[f32],
+    dims: GridDims,
+    [lx, ly, lz]: &[Vec<AxisLerp>; 3],
+    z: usize,
+    dst: &mut [f32],
+) {
+    let tz = lz[z];
+    let along_x = |zi: usize, yi: usize, l: &AxisLerp| {
+        let row = &channel[dims.index(zi, yi, 0)..][..dims.w];
+        lerp(row[l.i0], row[l.i1], l.t)
+    };
+    for (ty, out_row) in ly.iter().zip(dst.chunks_exact_mut(lx.len())) {
+        for (tx, out) in lx.iter().zip(out_row) {
+            let at_z = |zi: usize| lerp(along_x(zi, ty.i0, tx), along_x(zi, ty.i1, tx), ty.t);
+            *out = lerp(at_z(tz.i0), at_z(tz.i1), tz.t);
+        }
     }
 }
