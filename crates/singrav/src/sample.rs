@@ -32,8 +32,8 @@ pub struct Sample {
 /// The most rays one renderer call takes (and so the most pixels, doubled per side, one
 /// upsampler call takes) when a model renders many views ([`SinGrav::render_raw`],
 /// [`SinGrav::render_maps`]): the upsampler's activations and the renderer's buffers grow with
-/// the views of a call, and an `hd` model's 39 views of a sample (3 shown, a 36-frame
-/// turntable) rendered in one call peaked at several GB (docs/journal/2026-12-hd.md).
+/// the views of a call: an `hd` sample's 39 views (3 shown, a 36-frame turntable) at 320^2
+/// would go through the upsampler's 3x3 convolutions at once (docs/journal/2026-12-memory.md).
 pub const RAYS_PER_CALL: usize = 1 << 16;
 
 /// Splits `cameras` into consecutive runs of at most [`RAYS_PER_CALL`] rays, at least one camera

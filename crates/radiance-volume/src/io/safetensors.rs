@@ -1,14 +1,14 @@
 //! The native format: safetensors with one f32 tensor `volume` of shape `(C, D, H, W)` and
 //! optional string metadata (see `docs/formats.md`).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{Cursor, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
 use glam::Vec3;
-use safetensors::tensor::{Metadata, TensorInfo};
+use safetensors::tensor::Metadata;
 use safetensors::Dtype;
 
 use super::atomic::write_sized_atomic;
@@ -97,30 +97,36 @@ fn data_len(source: &dyn VolumeSource) -> usize {
 }
 
 /// The safetensors header of `source`: its JSON, padded with spaces to a multiple of 8 bytes
-/// as the safetensors crate writes it.
+/// as the safetensors crate writes it. The keys are in a fixed order (the crate's own writer
+/// follows a `HashMap`'s), so a volume's file has the same bytes at every write.
 fn header(source: &dyn VolumeSource) -> Result<Vec<u8>> {
     let d = source.dims();
     let b = source.grid().aabb;
-    let metadata = HashMap::from([
-        (KEY_FORMAT.to_string(), FORMAT_NAME.to_string()),
-        (KEY_VERSION.to_string(), FORMAT_VERSION.to_string()),
+    let metadata = BTreeMap::from([
+        (KEY_FORMAT, FORMAT_NAME.to_string()),
+        (KEY_VERSION, FORMAT_VERSION.to_string()),
         (
-            KEY_AABB.to_string(),
+            KEY_AABB,
             serde_json::to_string(&[b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
                 .expect("floats serialise"),
         ),
         (
-            KEY_CHANNELS.to_string(),
+            KEY_CHANNELS,
             serde_json::to_string(source.channel_names()).expect("strings serialise"),
         ),
     ]);
-    let info = TensorInfo {
-        dtype: Dtype::F32,
-        shape: vec![source.channel_count(), d.d, d.h, d.w],
-        data_offsets: (0, data_len(source)),
-    };
-    let header = Metadata::new(Some(metadata), vec![(TENSOR_NAME.to_string(), info)])
-        .map_err(|e| crate::error::invalid("volume", e.to_string()))?;
+    let info = serde_json::json!({
+        "dtype": "F32",
+        "shape": [source.channel_count(), d.d, d.h, d.w],
+        "data_offsets": [0, data_len(source)],
+    });
+    let header = BTreeMap::from([
+        (
+            "__metadata__",
+            serde_json::to_value(metadata).expect("strings serialise"),
+        ),
+        (TENSOR_NAME, info),
+    ]);
     let mut header = serde_json::to_vec(&header).expect("a safetensors header serialises");
     header.resize(header.len().next_multiple_of(8), b' ');
     Ok(header)
