@@ -20,8 +20,9 @@ const SWD_LEVELS: usize = 3;
 /// Patches per pyramid level one evaluation of the patch-pyramid SWD loss compares: a random
 /// subset drawn at every call, for the generated and for the real images. With
 /// [`SWD_SLICES`] directions it follows the expected gradient more closely than all patches
-/// along 64 directions did (relative error 0.23 against 0.30 at 320^2) at a fifth of the cost
-/// at 320^2 and the same at 108^2 (docs/swd-loss.md, "Random patches").
+/// along 64 directions did (relative error 0.23 against 0.31 at 320^2, 0.19 against 0.32 at
+/// 108^2), at a third of their time at 320^2 and about the same at 108^2 (docs/swd-loss.md,
+/// "Random patches").
 const SWD_POINTS: usize = 4096;
 
 /// Directions per level of the patch-pyramid SWD loss.
