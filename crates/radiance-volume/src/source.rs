@@ -68,11 +68,11 @@ impl Region {
 /// ```
 /// use radiance_volume::{Aabb, GridDims, RadianceVolume, Region, VolumeSource};
 /// let v = RadianceVolume::from_fn(GridDims::new(2, 3, 4), Aabb::CUBE, 4, |p, out| {
-///     out.copy_from_slice(&[p.x, p.y, p.z, 1.0]);
+///     out.copy_from_slice(&[p.x, p.z, p.y, 1.0]);
 /// })?;
-/// // Density and red of the voxels (z = 1, y = 0..2, x = 3).
+/// // Density (x) and red (z) of the voxels (z = 1, y = 0..2, x = 3): centres x = 0.75, z = 0.5.
 /// let block = v.read_block(0..2, &Region { z: 1..2, y: 0..2, x: 3..4 })?;
-/// assert_eq!(block, vec![0.75, 0.75, -2.0 / 3.0, 0.0]);
+/// assert_eq!(block, vec![0.75, 0.75, 0.5, 0.5]);
 /// # Ok::<(), radiance_volume::Error>(())
 /// ```
 pub trait VolumeSource: Sync + std::fmt::Debug {
