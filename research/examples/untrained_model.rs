@@ -1,6 +1,6 @@
 //! Writes a model of a preset's shape with untrained weights, marked as fully trained, so that
 //! `volgen sample`, `export`, `mesh`, `edit` and `compose` can be measured at that size (peak
-//! memory with `/usr/bin/time -v`, docs/journal/2026-12-hd-sampling.md) without a training
+//! memory with `/usr/bin/time -v`) without a training
 //! run: what they hold follows from the sizes, not from the weights. Untrained generators make
 //! thin fog everywhere, so a VDB of the samples has every leaf (as many as any scene can have).
 //!

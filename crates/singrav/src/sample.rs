@@ -33,7 +33,7 @@ pub struct Sample {
 /// upsampler call takes) when a model renders many views ([`SinGrav::render_raw`],
 /// [`SinGrav::render_maps`]): the upsampler's activations and the renderer's buffers grow with
 /// the views of a call: an `hd` sample's 39 views (3 shown, a 36-frame turntable) at 320^2
-/// would go through the upsampler's 3x3 convolutions at once (docs/journal/2026-12-memory.md).
+/// would otherwise go through the upsampler's 3x3 convolutions at once.
 pub const RAYS_PER_CALL: usize = 1 << 16;
 
 /// Splits `cameras` into consecutive runs of at most [`RAYS_PER_CALL`] rays, at least one camera
