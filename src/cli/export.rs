@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use radiance_volume::RadianceVolume;
+use radiance_volume::{RadianceVolume, VolumeSource};
 
 use super::to_capture::CaptureFrame;
 
@@ -91,19 +91,19 @@ pub fn run(args: &ExportArgs) -> Result<()> {
 }
 
 /// Writes `volume` as OpenVDB with the encoding `args`, saying what it wrote.
-pub fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &Encoding) -> Result<()> {
+pub fn write_vdb(volume: &dyn VolumeSource, path: &std::path::Path, args: &Encoding) -> Result<()> {
     write_vdb_placed(volume, path, args, None)
 }
 
 /// [`write_vdb`], the grid placed by the affine map `placed` when given.
 #[cfg(feature = "vdb")]
 pub fn write_vdb_placed(
-    volume: &RadianceVolume,
+    volume: &dyn VolumeSource,
     path: &std::path::Path,
     args: &Encoding,
     placed: Option<glam::DMat4>,
 ) -> Result<()> {
-    let mut writer = volume.write_vdb();
+    let mut writer = radiance_volume::io::VdbWriter::new(volume);
     if let Some(map) = placed {
         writer = writer.placed(map);
     }
@@ -126,7 +126,7 @@ pub fn write_vdb_placed(
 
 #[cfg(not(feature = "vdb"))]
 pub fn write_vdb_placed(
-    _: &RadianceVolume,
+    _: &dyn VolumeSource,
     _: &std::path::Path,
     _: &Encoding,
     _: Option<glam::DMat4>,
@@ -136,14 +136,13 @@ pub fn write_vdb_placed(
 
 #[cfg(feature = "exr")]
 pub fn write_exr_slices(
-    volume: &RadianceVolume,
+    volume: &dyn VolumeSource,
     dir: &std::path::Path,
     name: &str,
     args: &Encoding,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let files = volume
-        .write_exr_slices()
+    let files = radiance_volume::io::ExrSlicesWriter::new(volume)
         .half(args.half)
         .replace_non_finite(args.replace_non_finite)
         .to_dir(dir, name)?;
@@ -157,7 +156,7 @@ pub fn write_exr_slices(
 
 #[cfg(not(feature = "exr"))]
 pub fn write_exr_slices(
-    _: &RadianceVolume,
+    _: &dyn VolumeSource,
     _: &std::path::Path,
     _: &str,
     _: &Encoding,
