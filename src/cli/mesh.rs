@@ -164,7 +164,7 @@ pub fn write_mesh(volume: &RadianceVolume, path: &Path, shape: MeshShape) -> Res
 }
 
 /// The surface of `volume` as `shape` asks.
-fn mesh_of(volume: &RadianceVolume, shape: MeshShape) -> Result<Mesh> {
+pub fn mesh_of(volume: &RadianceVolume, shape: MeshShape) -> Result<Mesh> {
     Ok(
         Mesh::from_volume(volume, &MeshOptions { level: shape.level })?
             .smoothed(shape.smooth)
