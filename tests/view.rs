@@ -145,14 +145,12 @@ fn scenes_download_as_the_files_the_cli_writes() {
         "--vary-from",
         "2",
         "--vdb",
-        "--mesh",
-        "glb",
         "--out",
         path(&sampled),
     ]));
     let scene = server.json("/api/scene?seed=5&vary=2");
     assert_eq!(scene["name"], "scene_seed5_vary2");
-    for format in ["safetensors", "vdb", "glb"] {
+    for format in ["safetensors", "vdb"] {
         let response = server.get(scene["downloads"][format].as_str().unwrap());
         assert_eq!(response.status, 200, "{format}: {}", response.text());
         assert_eq!(
@@ -164,6 +162,26 @@ fn scenes_download_as_the_files_the_cli_writes() {
             response.body == cli,
             "{format}: the download differs from volgen sample's"
         );
+    }
+    // The mesh is `volgen mesh`'s of that volume (`sample --mesh glb` makes it so): the same
+    // bytes, or, where micro's thin matter has no surface at the default level, the same
+    // refusal (a 422 saying why).
+    let glb = server.get(scene["downloads"]["glb"].as_str().unwrap());
+    let meshed = tmp.path().join("scene_0.glb");
+    let cli = volgen(&[
+        "mesh",
+        path(&sampled.join("scene_0.safetensors")),
+        "--out",
+        path(&meshed),
+    ]);
+    if cli.status.success() {
+        assert_eq!(glb.status, 200, "{}", glb.text());
+        assert!(glb.body == std::fs::read(&meshed).unwrap());
+    } else {
+        assert_eq!(glb.status, 422, "{}", glb.text());
+        assert!(failure(&cli).contains("no surface"));
+        assert!(glb.text().contains("no surface"), "{}", glb.text());
+        assert_eq!(glb.text().trim_end().lines().count(), 1, "{}", glb.text());
     }
     // Frame 2 of the noise walk is frame 2 of volgen animate from the same seed.
     ok(&volgen(&[
@@ -274,6 +292,38 @@ fn serves_a_directory_of_volumes_and_one_volume() {
         one.json("/api/info")["files"],
         serde_json::json!(["scene_0"])
     );
+}
+
+#[test]
+fn a_volume_downloads_as_volgen_export_and_volgen_mesh_write_it() {
+    // A ball of dense orange matter: a volume with a surface to mesh.
+    let ball = radiance_volume::RadianceVolume::from_fn(
+        radiance_volume::GridDims::cube(20),
+        radiance_volume::Aabb::CUBE,
+        4,
+        |p, out| {
+            out[0] = if p.length() < 0.6 { 40.0 } else { 0.0 };
+            out[1..4].copy_from_slice(&[0.9, 0.5, 0.1]);
+        },
+    )
+    .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("ball.safetensors");
+    ball.save_safetensors(&file).unwrap();
+    let (vdb, glb) = (tmp.path().join("ball.vdb"), tmp.path().join("ball.glb"));
+    ok(&volgen(&["export", path(&file), "--vdb", path(&vdb)]));
+    ok(&volgen(&["mesh", path(&file), "--out", path(&glb)]));
+    let server = ViewServer::start(&[path(&file)]);
+    let scene = server.json("/api/scene");
+    assert_eq!(scene["name"], "ball");
+    for (format, cli) in [("safetensors", &file), ("vdb", &vdb), ("glb", &glb)] {
+        let response = server.get(scene["downloads"][format].as_str().unwrap());
+        assert_eq!(response.status, 200, "{format}: {}", response.text());
+        assert!(
+            response.body == std::fs::read(cli).unwrap(),
+            "{format}: the download differs from the CLI's file"
+        );
+    }
 }
 
 #[test]

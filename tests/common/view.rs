@@ -127,7 +127,10 @@ impl Response {
     }
 }
 
-/// `GET target` on `address` over HTTP/1.1, the target sent exactly as given.
+/// `GET target` on `address` over HTTP/1.1, the target sent exactly as given. The body is
+/// `Content-Length` bytes when the response says so (Chromium's DevTools server keeps the
+/// connection open after its answer, `Connection: close` or not), else all until the server
+/// closes.
 pub fn get(address: &str, target: &str) -> Response {
     let mut stream = TcpStream::connect(address).unwrap();
     stream
@@ -138,13 +141,16 @@ pub fn get(address: &str, target: &str) -> Response {
         "GET {target} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n"
     )
     .unwrap();
-    let mut raw = Vec::new();
-    stream.read_to_end(&mut raw).unwrap();
-    let split = raw
-        .windows(4)
-        .position(|w| w == b"\r\n\r\n")
-        .expect("a header");
-    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
+    let mut reader = BufReader::new(stream);
+    let mut head = Vec::new();
+    while !head.ends_with(b"\r\n\r\n") {
+        let read = reader.read_until(b'\n', &mut head).unwrap();
+        assert!(
+            read > 0,
+            "{target}: the connection closed inside the header"
+        );
+    }
+    let head = String::from_utf8_lossy(&head).into_owned();
     let mut lines = head.lines();
     let status = lines
         .next()
@@ -155,11 +161,18 @@ pub fn get(address: &str, target: &str) -> Response {
         .filter_map(|l| l.split_once(':'))
         .map(|(n, v)| (n.trim().to_ascii_lowercase(), v.trim().to_string()))
         .collect();
-    let mut body = raw[split + 4..].to_vec();
-    if headers
-        .iter()
-        .any(|(n, v)| n == "transfer-encoding" && v.contains("chunked"))
-    {
+    let header = |name: &str| headers.iter().find(|(n, _)| n == name).map(|(_, v)| v);
+    let mut body = Vec::new();
+    match header("content-length").and_then(|v| v.parse::<usize>().ok()) {
+        Some(length) => {
+            body.resize(length, 0);
+            reader.read_exact(&mut body).unwrap();
+        }
+        None => {
+            reader.read_to_end(&mut body).unwrap();
+        }
+    }
+    if header("transfer-encoding").is_some_and(|v| v.contains("chunked")) {
         body = unchunk(&body);
     }
     Response {

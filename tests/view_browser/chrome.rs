@@ -238,14 +238,15 @@ impl Session {
         );
     }
 
-    /// A PNG screenshot of the element `selector` (the whole page when `None`).
+    /// A PNG screenshot of the element `selector` (the whole page when `None`); the clip is in
+    /// the document's coordinates, hence the scroll offsets.
     pub fn screenshot(&mut self, selector: Option<&str>) -> Vec<u8> {
         let mut params =
             json!({"format": "png", "fromSurface": true, "captureBeyondViewport": false});
         if let Some(selector) = selector {
             let rect = self.eval(&format!(
                 "(() => {{ const r = document.querySelector('{selector}').getBoundingClientRect(); \
-                 return [r.x, r.y, r.width, r.height]; }})()"
+                 return [r.x + window.scrollX, r.y + window.scrollY, r.width, r.height]; }})()"
             ));
             params["clip"] = json!({
                 "x": rect[0], "y": rect[1], "width": rect[2], "height": rect[3], "scale": 1,

@@ -232,11 +232,13 @@ impl Check<'_> {
     }
 
     /// Waits until `condition` holds and the page waits for nothing, and for its last frame
-    /// to reach the screen (the compositor shows it on the next animation frame).
+    /// to reach the screen (the compositor shows it on the next animation frame). Until the
+    /// page's script has run (just after navigating), `volgen` is not there yet.
     fn wait_until(&mut self, condition: &str) {
-        self.chrome
-            .page
-            .wait_until(&format!("volgen.idle() && {condition}"), WAIT);
+        self.chrome.page.wait_until(
+            &format!("window.volgen !== undefined && volgen.idle() && {condition}"),
+            WAIT,
+        );
         self.chrome.page.eval(
             "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(true))))",
         );
