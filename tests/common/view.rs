@@ -198,6 +198,27 @@ fn unchunk(mut raw: &[u8]) -> Vec<u8> {
     }
 }
 
+/// Whether two files in `format` (an extension) are the same file: byte for byte, but for
+/// `.safetensors` up to the order of the header's keys (the writer's metadata is a hash map,
+/// whose order changes from one process to the next).
+pub fn same_file(format: &str, a: &[u8], b: &[u8]) -> bool {
+    if format == "safetensors" {
+        same_safetensors(a, b)
+    } else {
+        a == b
+    }
+}
+
+/// Whether two `.safetensors` files hold the same header (as JSON) and the same tensor bytes.
+pub fn same_safetensors(a: &[u8], b: &[u8]) -> bool {
+    let split = |file: &[u8]| -> (serde_json::Value, Vec<u8>) {
+        let length = u64::from_le_bytes(file[..8].try_into().unwrap()) as usize;
+        let header = serde_json::from_slice(&file[8..8 + length]).expect("a safetensors header");
+        (header, file[8 + length..].to_vec())
+    };
+    split(a) == split(b)
+}
+
 /// Trains the `micro` preset (a run with two 3D scales and the upsampler) on a small stones
 /// dataset once per test binary, into `name` under cargo's directory for test files (so
 /// nothing is left in /tmp: a static is never dropped); returns `(data, run)`.
