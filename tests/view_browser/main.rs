@@ -33,8 +33,9 @@ const MIN_PSNR_SAME_VOLUME: f64 = 40.0;
 /// file is the physical volume on a finer grid, not the grid the page draws.
 const MIN_PSNR_CLI: f64 = 30.0;
 /// Most agreement between screenshots that must differ (dB). The page draws the same state
-/// identically (infinite PSNR); `micro`'s blurred scenes change less than a trained run's.
-const MAX_PSNR_CHANGED: f64 = 35.0;
+/// identically (infinite PSNR); `micro`'s barely trained scenes change little from seed to seed
+/// (36 dB between two seeds, 2026-12-06; a `tiny` run's 23 dB).
+const MAX_PSNR_CHANGED: f64 = 45.0;
 
 const WAIT: Duration = Duration::from_secs(120);
 
