@@ -228,7 +228,8 @@ mod tests {
         let bytes = texture_bytes(&volume).unwrap();
         let value = |i: usize| f32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
         // Texel (x, y, z) = (2, 1, 1), channel 3.
-        let texel = (1 * 2 + 1) * 3 + 2;
+        let (x, y, z) = (2, 1, 1);
+        let texel = (z * 2 + y) * 3 + x;
         assert_eq!(value(4 * texel + 3), 3112.0);
         assert_eq!(value(4 * texel), 112.0);
         assert_eq!(bytes.len(), 2 * 2 * 3 * 4 * 4);

@@ -28,7 +28,9 @@ const EXTENT_CHOICES: [&str; 6] = ["1,1,1", "2,1,1", "1,2,1", "2,2,1", "3,3,1", 
 
 /// A source of scenes.
 pub enum Source {
-    Model(ModelSource),
+    /// Boxed: a model (its configuration, generators and noise) is far larger than a list of
+    /// files.
+    Model(Box<ModelSource>),
     Files(FileSource),
 }
 
@@ -64,7 +66,7 @@ impl Source {
         if is_run {
             let model = load_model(path)?;
             let extent = (model.extent(), Outside::default());
-            return Ok(Source::Model(ModelSource { model, extent }));
+            return Ok(Source::Model(Box::new(ModelSource { model, extent })));
         }
         let files = if path.is_dir() {
             volume_files(path)?
