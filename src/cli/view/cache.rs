@@ -69,7 +69,7 @@ impl Cache {
 
     /// How many scenes it holds.
     #[cfg(test)]
-    pub fn len(&self) -> usize {
+    pub fn scene_count(&self) -> usize {
         self.scenes.len()
     }
 
@@ -122,7 +122,7 @@ mod tests {
         // Using scene 0 makes scene 1 the least recently used.
         assert!(cache.find(&SceneKey::File { index: 0 }).is_some());
         cache.insert(scene(3, 2));
-        assert_eq!(cache.len(), 3);
+        assert_eq!(cache.scene_count(), 3);
         assert!(cache.find(&SceneKey::File { index: 1 }).is_none());
         assert!(cache.find(&SceneKey::File { index: 0 }).is_some());
         // Numbers are never reused: a dropped scene's number finds nothing.
@@ -141,9 +141,9 @@ mod tests {
             cache.insert(scene(i, 4));
             assert!(cache.bytes() <= 5000);
         }
-        assert_eq!(cache.len(), 2);
+        assert_eq!(cache.scene_count(), 2);
         let big = cache.insert(scene(9, 16));
-        assert_eq!(cache.len(), 1);
+        assert_eq!(cache.scene_count(), 1);
         assert!(big.bytes() > 5000 && cache.get(big.id).is_some());
     }
 }

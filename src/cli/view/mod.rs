@@ -93,7 +93,7 @@ fn training_views(args: &ViewArgs, source: &Source) -> Result<Vec<views::Trainin
     let run_like = matches!(source, Source::Model(_));
     let dataset = match &args.dataset {
         Some(given) => Some(given.clone()),
-        None if run_like => views::dataset_for(&args.path, None),
+        None if run_like => views::dataset_beside(&args.path),
         None => None,
     };
     let Some(dataset) = dataset else {

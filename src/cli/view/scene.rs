@@ -207,7 +207,6 @@ fn texture_bytes(volume: &RadianceVolume) -> Result<Bytes> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use radiance_volume::Aabb;
 
     #[test]
     fn the_texture_interleaves_channels_with_x_fastest() {

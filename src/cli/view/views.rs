@@ -51,13 +51,9 @@ pub fn load(dir: &Path, background: [f32; 3]) -> Result<Vec<TrainingView>> {
         .collect()
 }
 
-/// The dataset to show beside a model at `run`: `--dataset` when given, else the `dataset`
-/// directory beside the run directory (where `volgen demo` writes it) when it has a
-/// `transforms.json`.
-pub fn dataset_for(run: &Path, given: Option<&Path>) -> Option<PathBuf> {
-    if let Some(given) = given {
-        return Some(given.to_path_buf());
-    }
+/// The dataset beside a model at `run` (its directory or checkpoint): the `dataset` directory
+/// beside the run directory, where `volgen demo` writes it, when it has a `transforms.json`.
+pub fn dataset_beside(run: &Path) -> Option<PathBuf> {
     let run_dir = if run.is_dir() { run } else { run.parent()? };
     let beside = run_dir.canonicalize().ok()?.parent()?.join("dataset");
     beside.join("transforms.json").is_file().then_some(beside)
