@@ -103,17 +103,11 @@ pub fn write_vdb_placed(
     args: &Encoding,
     placed: Option<glam::DMat4>,
 ) -> Result<()> {
-    let mut writer = radiance_volume::io::VdbWriter::new(volume);
+    let mut writer = vdb_writer(volume, args);
     if let Some(map) = placed {
         writer = writer.placed(map);
     }
-    let stats = writer
-        .half(args.half)
-        .zlib(args.zlib)
-        .threshold(args.threshold)
-        .feature_grids(args.feature_grids)
-        .replace_non_finite(args.replace_non_finite)
-        .to_file(path)?;
+    let stats = writer.to_file(path)?;
     println!(
         "wrote {} ({} leaves, {} active voxels, {} bytes)",
         path.display(),
@@ -122,6 +116,33 @@ pub fn write_vdb_placed(
         stats.bytes
     );
     Ok(())
+}
+
+/// The bytes [`write_vdb`] writes for `volume` (for `volgen view`'s downloads).
+#[cfg(feature = "vdb")]
+pub fn vdb_bytes(volume: &dyn VolumeSource, args: &Encoding) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    vdb_writer(volume, args).to_writer(&mut bytes)?;
+    Ok(bytes)
+}
+
+/// The OpenVDB writer of `volume` with the encoding `args`.
+#[cfg(feature = "vdb")]
+fn vdb_writer<'a>(
+    volume: &'a dyn VolumeSource,
+    args: &Encoding,
+) -> radiance_volume::io::VdbWriter<'a> {
+    radiance_volume::io::VdbWriter::new(volume)
+        .half(args.half)
+        .zlib(args.zlib)
+        .threshold(args.threshold)
+        .feature_grids(args.feature_grids)
+        .replace_non_finite(args.replace_non_finite)
+}
+
+#[cfg(not(feature = "vdb"))]
+pub fn vdb_bytes(_: &dyn VolumeSource, _: &Encoding) -> Result<Vec<u8>> {
+    bail!("this volgen was built without the `vdb` feature; rebuild with `--features vdb`")
 }
 
 #[cfg(not(feature = "vdb"))]

@@ -164,7 +164,7 @@ pub fn write_mesh(volume: &dyn VolumeSource, path: &Path, shape: MeshShape) -> R
 }
 
 /// The surface of `volume` as `shape` asks.
-fn mesh_of(volume: &dyn VolumeSource, shape: MeshShape) -> Result<Mesh> {
+pub fn mesh_of(volume: &dyn VolumeSource, shape: MeshShape) -> Result<Mesh> {
     Ok(
         Mesh::from_source(volume, &MeshOptions { level: shape.level })?
             .smoothed(shape.smooth)

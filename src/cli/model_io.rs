@@ -12,7 +12,8 @@ use singrav::SinGrav;
 use super::export::{write_exr_slices, write_vdb, Encoding};
 
 /// Extra formats each generated volume is written in, beside its safetensors file and PNG.
-#[derive(Debug, Clone, Copy, clap::Args)]
+/// The default is the flags' defaults: no extra format, the default upsampling.
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
 pub struct Outputs {
     /// Also write each volume as OpenVDB (density and color grids).
     #[arg(long)]

@@ -7,7 +7,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use radiance_volume::{Aabb, Activation, RadianceVolume, Resampled};
-use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
+use volrender::{Camera, DensityInterpolation, RenderConfig, PAPER_FOV_DEG, PAPER_RADIUS};
 
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
 use crate::error::{Error, Result};
@@ -413,6 +413,28 @@ impl SinGrav {
             Some(detail) => Ok((volume + detail)?),
             None => Ok(volume),
         }
+    }
+
+    /// The settings [`SinGrav::render_raw`] renders scenes with before the upsampler: the
+    /// finest 3D scale's uniform samples per ray (grown with the box at another
+    /// [extent](SinGrav::set_extent)), the background and the density rule, over
+    /// [`SinGrav::model_box`] in the model's units. A renderer outside the model (a viewer)
+    /// takes the samples and background from here and the volume and density rule from
+    /// [`SinGrav::to_rendered`], which are in the scene's coordinates.
+    ///
+    /// ```
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let mut model = singrav::SinGrav::new(&config, &candle_core::Device::Cpu, &mut rng)?;
+    /// model.push_generator(1.0, &mut rng)?;
+    /// let settings = model.render_config();
+    /// assert_eq!(settings.sampler, volrender::Sampler::Uniform { samples: config.pyramid.samples[0] });
+    /// assert_eq!(settings.background, Some(config.rendering.background));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn render_config(&self) -> RenderConfig {
+        *self.final_renderer().render_config()
     }
 
     /// The renderer of the finest 3D scale, depth in world units.

@@ -46,9 +46,7 @@ impl RadianceVolume {
 
     /// Serialises the volume to safetensors bytes.
     pub fn to_safetensors_bytes(&self) -> Result<Vec<u8>> {
-        let mut bytes = Vec::new();
-        write_safetensors_to(self, &header(self)?, &mut bytes, Path::new("<memory>"))?;
-        Ok(bytes)
+        safetensors_bytes(self)
     }
 
     /// Loads a volume saved by [`save_safetensors`](Self::save_safetensors) or written by any
@@ -89,6 +87,24 @@ pub fn write_safetensors(source: &dyn VolumeSource, path: impl AsRef<Path>) -> R
     write_sized_atomic(path, bytes, |w| {
         write_safetensors_to(source, &header, w, path)
     })
+}
+
+/// The bytes [`write_safetensors`] writes for `source`, in memory (a server's download, say).
+///
+/// ```
+/// use radiance_volume::{Aabb, GridDims, RadianceVolume, Resampled};
+/// let v = RadianceVolume::from_fn(GridDims::cube(4), Aabb::CUBE, 4, |p, out| out[0] = p.x)?;
+/// let bytes = radiance_volume::io::safetensors_bytes(&Resampled::finer(v, 3)?)?;
+/// let path = std::path::Path::new("fine.safetensors");
+/// let fine = RadianceVolume::from_safetensors_bytes(&bytes, path)?;
+/// assert_eq!(fine.dims(), GridDims::cube(12));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn safetensors_bytes(source: &dyn VolumeSource) -> Result<Vec<u8>> {
+    let header = header(source)?;
+    let mut bytes = Vec::with_capacity(8 + header.len() + data_len(source));
+    write_safetensors_to(source, &header, &mut bytes, Path::new("<memory>"))?;
+    Ok(bytes)
 }
 
 /// The bytes of the `volume` tensor's values.
