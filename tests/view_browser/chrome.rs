@@ -20,7 +20,8 @@ use crate::common::view::get;
 
 /// A headless Chromium with software WebGL and a fresh profile, killed when dropped.
 pub struct Chrome {
-    child: Child,
+    /// Held, not used: dropping it ends the browser.
+    _process: Process,
     /// The browser target (downloads).
     browser: Session,
     /// The page.
@@ -63,6 +64,8 @@ impl Chrome {
             .spawn()
             .expect("chromium starts (apt-get install chromium)");
         let stderr = BufReader::new(child.stderr.take().unwrap());
+        // From here on a failed start ends the browser too.
+        let process = Process(child);
         let (tx, rx) = mpsc::channel();
         std::thread::spawn(move || {
             for line in stderr.lines().map_while(Result::ok) {
@@ -82,7 +85,7 @@ impl Chrome {
             .to_string();
         let page_url = wait_for_page(&host);
         let mut chrome = Chrome {
-            child,
+            _process: process,
             browser: Session::connect(&browser_url),
             page: Session::connect(&page_url),
         };
@@ -102,10 +105,13 @@ impl Chrome {
     }
 }
 
-impl Drop for Chrome {
+/// The browser's process, killed when dropped (also while a failed start unwinds).
+struct Process(Child);
+
+impl Drop for Process {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }
 
