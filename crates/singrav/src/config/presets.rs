@@ -133,11 +133,9 @@ impl TrainConfig {
     /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
     ///   generated views.
     /// - `hd`: the paper's resolution on a CPU: N = 8, volumes ramping from 16^3 to 126^3,
-    ///   renderings from 32^2 to 160^2 (final 320^2), `tiny`'s recipe (16 channels, L = 5,
-    ///   3D critic of the coarsest volumes, post-activated density, the binary-opacity prior
-    ///   with the chroma loss) with a schedule of its own, its fit at 45^3 and its
-    ///   reconstruction on random pixels of all views; 38 to 39 minutes of training on 2 CPU
-    ///   cores (an Intel Xeon with AVX-512, 2026-12-06).
+    ///   renderings from 32^2 to 160^2 (final 320^2), `small`'s recipe (16 channels, L = 5,
+    ///   `tiny`'s training recipe, 3D critic of the coarsest volumes and post-activated
+    ///   density) with a schedule of its own and its fit at 45^3.
     /// - `small`: N = 5, volumes 16, 32, 43, 57, renderings 32..108 (final 216^2), 16 channels,
     ///   `tiny`'s training recipe, 3D critic and post-activated density without its
     ///   binary-opacity prior, and a schedule of its own (fewest iterations at the costly fine
@@ -176,7 +174,7 @@ impl TrainConfig {
                 let mut hd = cpu_recipe(sizes, &HD_ITERATIONS);
                 hd.pyramid.fit_size = Some(HD_FIT_SIZE);
                 hd.schedule.reconstruction_pixels = Some(HD_RECONSTRUCTION_PIXELS);
-                Ok(arranged_and_sharp(with_binary_opacity(hd)))
+                Ok(arranged_and_sharp(hd))
             }
             "small" => {
                 let mut small = cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS);
@@ -353,8 +351,7 @@ fn cpu_recipe(mut config: TrainConfig, iterations: &[usize]) -> TrainConfig {
 }
 
 /// `tiny`'s binary-opacity prior of samples with the chroma-distribution loss that keeps their
-/// stones grey under it (`tiny` and `hd`, whose stones it made grey and solid where they were
-/// soft and purple; on `small` the prior cost colour, V* and diversity).
+/// stones grey under it (`tiny` only: on `small` the prior cost colour, V* and diversity).
 fn with_binary_opacity(mut config: TrainConfig) -> TrainConfig {
     config.losses.opacity_binary = TINY_OPACITY_BINARY;
     config.losses.chroma_distribution = TINY_CHROMA;
@@ -482,10 +479,10 @@ mod tests {
     }
 
     #[test]
-    fn hd_has_the_papers_finest_sizes_on_ramps_and_tinys_recipe() {
-        let (hd, tiny) = (
+    fn hd_has_the_papers_finest_sizes_on_ramps_and_smalls_recipe() {
+        let (hd, small) = (
             TrainConfig::preset("hd").unwrap(),
-            TrainConfig::preset("tiny").unwrap(),
+            TrainConfig::preset("small").unwrap(),
         );
         hd.validate().unwrap();
         assert_eq!(hd.pyramid.volume_sizes, [16, 23, 32, 45, 63, 89, 126]);
@@ -511,15 +508,15 @@ mod tests {
         assert_eq!(hd.pyramid.fit_size, Some(45));
         assert_eq!(hd.fit_config().size, 45);
         assert_eq!(hd.schedule.reconstruction_pixels, Some(51_200));
-        // tiny's recipe, binary-opacity prior included: everything but the sizes, the
-        // schedule, the fit's size and the reconstruction's pixels.
+        // small's recipe: everything but the sizes, the schedule, the fit's size and the
+        // reconstruction's pixels.
         let mut resized = hd.clone();
-        resized.preset = tiny.preset.clone();
-        resized.pyramid = tiny.pyramid.clone();
-        resized.schedule.scales = tiny.schedule.scales.clone();
-        resized.schedule.scale_views = tiny.schedule.scale_views.clone();
+        resized.preset = small.preset.clone();
+        resized.pyramid = small.pyramid.clone();
+        resized.schedule.scales = small.schedule.scales.clone();
+        resized.schedule.scale_views = small.schedule.scale_views.clone();
         resized.schedule.reconstruction_pixels = None;
-        assert_eq!(resized, tiny);
+        assert_eq!(resized, small);
     }
 
     #[test]
