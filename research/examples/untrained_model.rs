@@ -40,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     config.schedule.scales.resize(volumes + 1, last);
     if let Some(views) = &mut config.schedule.scale_views {
         let last = *views.last().ok_or("the preset has empty scale views")?;
-        views.resize(volumes, last);
+        views.resize(volumes + 1, last);
     }
     config.validate()?;
 
