@@ -48,7 +48,7 @@ pub use grid::{Aabb, GridDims, VoxelGrid};
 pub use mask::dilate_mask;
 pub use occupancy::OccupancyGrid;
 pub use resample::{resample_tensor, Resampled};
-pub use source::{z_slabs, Region, SlabLimit, VolumeSource, SLAB_VALUES};
+pub use source::{z_slabs, SlabLimit, VolumeSource, SLAB_VALUES};
 pub use volume::{RadianceVolume, BASE_CHANNELS};
 
 /// The types most users need, for `use radiance_volume::prelude::*`.

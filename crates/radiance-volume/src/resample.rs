@@ -10,8 +10,9 @@ use crate::activation::Activation;
 use crate::error::{invalid, Result};
 use crate::grid::{GridDims, VoxelGrid};
 use crate::sample::AxisLerp;
-use crate::source::{check_channels, Region, VolumeSource};
+use crate::source::{check_channels, VolumeSource};
 use crate::volume::RadianceVolume;
+use crate::VoxelRange;
 
 /// Returns the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis of `n_in`
 /// cells at the centres of `n_out` cells over the same extent (edge-clamped).
@@ -112,14 +113,14 @@ impl RadianceVolume {
 /// volume 27 times larger than the source (`factor` 3) through a small buffer.
 ///
 /// ```
-/// use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume, Region, Resampled, VolumeSource};
+/// use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume, VoxelRange, Resampled, VolumeSource};
 /// let v = RadianceVolume::from_fn(GridDims::cube(4), Aabb::CUBE, 4, |p, out| {
 ///     out.copy_from_slice(&[p.x, 0.5, 0.5, 0.5]);
 /// })?;
 /// let fine = Resampled::finer(v, 3)?.with_density_activation(Activation::default());
 /// assert_eq!(fine.dims(), GridDims::cube(12));
 /// // Fine cell x = 4 sits on the centre of coarse cell 1 (x = -0.25): softplus(-0.25).
-/// let sigma = fine.read_block(0..1, &Region { z: 0..1, y: 0..1, x: 4..5 })?[0];
+/// let sigma = fine.read_block(0..1, &VoxelRange { z: 0..1, y: 0..1, x: 4..5 })?[0];
 /// assert!((sigma - (1.0 + (-0.25f32).exp()).ln()).abs() < 1e-6);
 /// # Ok::<(), radiance_volume::Error>(())
 /// ```
@@ -161,7 +162,7 @@ impl Resampled {
 
     /// Computes the whole volume at once (as much memory as its cells need).
     pub fn to_volume(&self) -> Result<RadianceVolume> {
-        let values = self.read_block(0..self.channel_count(), &Region::all(self.dims))?;
+        let values = self.read_block(0..self.channel_count(), &VoxelRange::all(self.dims))?;
         let d = self.dims;
         let shape = (self.channel_count(), d.d, d.h, d.w);
         let data = Tensor::from_vec(values, shape, self.volume.tensor().device())?;
@@ -181,8 +182,8 @@ impl VolumeSource for Resampled {
         self.volume.channel_names()
     }
 
-    fn read_block(&self, channels: Range<usize>, region: &Region) -> Result<Vec<f32>> {
-        region.check(self.dims)?;
+    fn read_block(&self, channels: Range<usize>, region: &VoxelRange) -> Result<Vec<f32>> {
+        region.validate(self.dims)?;
         check_channels(&channels, self.channel_count())?;
         let coarse = self.volume.dims();
         let lerps = [

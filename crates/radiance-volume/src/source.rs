@@ -7,22 +7,13 @@
 
 use std::ops::Range;
 
+use crate::edit::VoxelRange;
 use crate::error::{invalid, Error, Result};
 use crate::grid::{GridDims, VoxelGrid};
 use crate::volume::RadianceVolume;
 
-/// A box of voxels: index ranges along z (`d`), y (`h`) and x (`w`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Region {
-    /// Cells along z.
-    pub z: Range<usize>,
-    /// Cells along y.
-    pub y: Range<usize>,
-    /// Cells along x.
-    pub x: Range<usize>,
-}
-
-impl Region {
+/// Blocks are [`VoxelRange`]s (the edits' box of voxels); a reader's usual ones.
+impl VoxelRange {
     /// The whole grid.
     #[must_use]
     pub fn all(dims: GridDims) -> Self {
@@ -32,30 +23,7 @@ impl Region {
     /// Whole planes `z` of the grid.
     #[must_use]
     pub fn z_slab(dims: GridDims, z: Range<usize>) -> Self {
-        Self {
-            z,
-            y: 0..dims.h,
-            x: 0..dims.w,
-        }
-    }
-
-    /// The region's sizes.
-    #[must_use]
-    pub fn dims(&self) -> GridDims {
-        GridDims::new(self.z.len(), self.y.len(), self.x.len())
-    }
-
-    /// Fails unless the region is non-empty and inside `dims`.
-    pub(crate) fn check(&self, dims: GridDims) -> Result<()> {
-        let inside = |r: &Range<usize>, n: usize| r.start < r.end && r.end <= n;
-        if inside(&self.z, dims.d) && inside(&self.y, dims.h) && inside(&self.x, dims.w) {
-            Ok(())
-        } else {
-            Err(invalid(
-                "region",
-                format!("{self:?} is empty or reaches beyond the grid {dims:?}"),
-            ))
-        }
+        Self::new(z, 0..dims.h, 0..dims.w)
     }
 }
 
@@ -66,12 +34,12 @@ impl Region {
 /// holds there.
 ///
 /// ```
-/// use radiance_volume::{Aabb, GridDims, RadianceVolume, Region, VolumeSource};
+/// use radiance_volume::{Aabb, GridDims, RadianceVolume, VoxelRange, VolumeSource};
 /// let v = RadianceVolume::from_fn(GridDims::new(2, 3, 4), Aabb::CUBE, 4, |p, out| {
 ///     out.copy_from_slice(&[p.x, p.z, p.y, 1.0]);
 /// })?;
 /// // Density (x) and red (z) of the voxels (z = 1, y = 0..2, x = 3): centres x = 0.75, z = 0.5.
-/// let block = v.read_block(0..2, &Region { z: 1..2, y: 0..2, x: 3..4 })?;
+/// let block = v.read_block(0..2, &VoxelRange { z: 1..2, y: 0..2, x: 3..4 })?;
 /// assert_eq!(block, vec![0.75, 0.75, 0.5, 0.5]);
 /// # Ok::<(), radiance_volume::Error>(())
 /// ```
@@ -84,7 +52,7 @@ pub trait VolumeSource: Sync + std::fmt::Debug {
 
     /// Returns channels `channels` over `region`, channel-major: a `(C', dz, dy, dx)` row-major
     /// array. Errors if a range is empty or beyond the volume.
-    fn read_block(&self, channels: Range<usize>, region: &Region) -> Result<Vec<f32>>;
+    fn read_block(&self, channels: Range<usize>, region: &VoxelRange) -> Result<Vec<f32>>;
 
     /// The cells along each axis.
     fn dims(&self) -> GridDims {
@@ -110,7 +78,7 @@ pub trait VolumeSource: Sync + std::fmt::Debug {
         let (mut count, mut first) = (0usize, None);
         for c in channels {
             for z in z_slabs(dims, 1, self.slab_values()) {
-                let values = self.read_block(c..c + 1, &Region::z_slab(dims, z.clone()))?;
+                let values = self.read_block(c..c + 1, &VoxelRange::z_slab(dims, z.clone()))?;
                 for (at, v) in values.iter().enumerate().filter(|(_, v)| !v.is_finite()) {
                     count += 1;
                     if first.is_none() {
@@ -191,7 +159,7 @@ impl VolumeSource for SlabLimit<'_> {
         self.source.channel_names()
     }
 
-    fn read_block(&self, channels: Range<usize>, region: &Region) -> Result<Vec<f32>> {
+    fn read_block(&self, channels: Range<usize>, region: &VoxelRange) -> Result<Vec<f32>> {
         self.source.read_block(channels, region)
     }
 
@@ -229,9 +197,9 @@ impl VolumeSource for RadianceVolume {
         RadianceVolume::channel_names(self)
     }
 
-    fn read_block(&self, channels: Range<usize>, region: &Region) -> Result<Vec<f32>> {
+    fn read_block(&self, channels: Range<usize>, region: &VoxelRange) -> Result<Vec<f32>> {
         let dims = self.dims();
-        region.check(dims)?;
+        region.validate(dims)?;
         check_channels(&channels, self.channel_count())?;
         let out_dims = region.dims();
         let mut out = Vec::with_capacity(channels.len() * out_dims.voxel_count());

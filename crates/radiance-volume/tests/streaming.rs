@@ -8,8 +8,8 @@
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use radiance_volume::{
-    io::write_safetensors, resample_tensor, Aabb, Activation, GridDims, RadianceVolume, Region,
-    Resampled, SlabLimit, VolumeSource,
+    io::write_safetensors, resample_tensor, Aabb, Activation, GridDims, RadianceVolume, Resampled,
+    SlabLimit, VolumeSource, VoxelRange,
 };
 
 /// Raw density that crosses the activation's knee (a ball), colour and one feature varying
@@ -65,10 +65,10 @@ fn blocks_equal_the_whole_and_the_tensor_path() {
     // Blocks of every shape and place, any channel range, against the whole.
     let whole_values = values(&whole);
     for (channels, region) in [
-        (0..5, Region::all(d)),
+        (0..5, VoxelRange::all(d)),
         (
             0..1,
-            Region {
+            VoxelRange {
                 z: 3..4,
                 y: 0..21,
                 x: 5..6,
@@ -76,7 +76,7 @@ fn blocks_equal_the_whole_and_the_tensor_path() {
         ),
         (
             1..4,
-            Region {
+            VoxelRange {
                 z: 14..15,
                 y: 20..21,
                 x: 0..18,
@@ -84,7 +84,7 @@ fn blocks_equal_the_whole_and_the_tensor_path() {
         ),
         (
             2..5,
-            Region {
+            VoxelRange {
                 z: 0..7,
                 y: 4..13,
                 x: 9..17,
@@ -92,7 +92,7 @@ fn blocks_equal_the_whole_and_the_tensor_path() {
         ),
         (
             0..3,
-            Region {
+            VoxelRange {
                 z: 1..15,
                 y: 1..2,
                 x: 17..18,
@@ -115,14 +115,14 @@ fn blocks_equal_the_whole_and_the_tensor_path() {
     assert!(fine
         .read_block(
             0..1,
-            &Region {
+            &VoxelRange {
                 z: 0..16,
                 y: 0..1,
                 x: 0..1
             }
         )
         .is_err());
-    assert!(fine.read_block(5..6, &Region::all(d)).is_err());
+    assert!(fine.read_block(5..6, &VoxelRange::all(d)).is_err());
 
     // At the volume's own size nothing is interpolated: the values are copied bit for bit.
     let same = Resampled::new(v.clone(), v.dims())

@@ -53,7 +53,7 @@ pub fn physical_upsampled(
 ///
 /// ```
 /// use candle_core::{Device, Tensor};
-/// use radiance_volume::{Aabb, GridDims, RadianceVolume, Region, VolumeSource};
+/// use radiance_volume::{Aabb, GridDims, RadianceVolume, VoxelRange, VolumeSource};
 /// use volrender::DensityInterpolation;
 /// let raw = Tensor::new(&[4f32, -4.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5], &Device::Cpu)?
 ///     .reshape((4, 1, 1, 2))?;
@@ -62,7 +62,7 @@ pub fn physical_upsampled(
 /// let fine = singrav::export::physical_upsampled_source(&rendered, rule, 3)?;
 /// assert_eq!(fine.dims(), GridDims::new(3, 3, 6));
 /// // The voxel on the first coarse centre: softplus(4).
-/// let sigma = fine.read_block(0..1, &Region { z: 1..2, y: 1..2, x: 1..2 })?;
+/// let sigma = fine.read_block(0..1, &VoxelRange { z: 1..2, y: 1..2, x: 1..2 })?;
 /// assert!((sigma[0] - 4.01815).abs() < 1e-4);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```

@@ -6,7 +6,7 @@ use std::ops::Range;
 use fast_surface_nets::ndshape::{RuntimeShape, Shape};
 use fast_surface_nets::{surface_nets, SurfaceNetsBuffer};
 use glam::Vec3;
-use radiance_volume::{z_slabs, GridDims, RadianceVolume, Region, VolumeSource, VoxelGrid};
+use radiance_volume::{z_slabs, GridDims, RadianceVolume, VolumeSource, VoxelGrid, VoxelRange};
 
 use crate::error::{invalid, Error, Result};
 use crate::mesh::Mesh;
@@ -109,7 +109,7 @@ impl Mesh {
         let mut sdf = vec![level; shape.size() as usize];
         let mut peak = 0f32;
         for slab in z_slabs(dims, 1, volume.slab_values()) {
-            let sigma = volume.read_block(0..1, &Region::z_slab(dims, slab.clone()))?;
+            let sigma = volume.read_block(0..1, &VoxelRange::z_slab(dims, slab.clone()))?;
             for (z, plane) in slab.zip(sigma.chunks_exact(w * h)) {
                 for (y, row) in plane.chunks_exact(w).enumerate() {
                     for (x, &s) in row.iter().enumerate() {
@@ -174,7 +174,7 @@ fn matter_colours(volume: &dyn VolumeSource, points: &[Vec3]) -> Result<Vec<[f32
     let mut next = 0;
     for slab in z_slabs(dims, 4, volume.slab_values()) {
         let planes = slab.start..(slab.end + 1).min(dims.d);
-        let block = volume.read_block(0..4, &Region::z_slab(dims, planes.clone()))?;
+        let block = volume.read_block(0..4, &VoxelRange::z_slab(dims, planes.clone()))?;
         while next < order.len() && taps[order[next]][2].low < slab.end {
             let i = order[next];
             colours[i] = matter_colour(&block, planes.clone(), dims, &taps[i]);

@@ -36,8 +36,9 @@ use serde::{Deserialize, Serialize};
 use super::atomic::{check_writable, remove_file_if_exists, write_atomic, write_bytes_atomic};
 use crate::error::{beyond_half, invalid, io_error, Error, Result};
 use crate::grid::{Aabb, GridDims};
-use crate::source::{Region, VolumeSource};
+use crate::source::VolumeSource;
 use crate::volume::RadianceVolume;
+use crate::VoxelRange;
 
 /// The value of the sidecar's `format` field.
 pub const SIDECAR_FORMAT: &str = "volgen.exr-slices";
@@ -228,7 +229,7 @@ impl<'a> ExrSlicesWriter<'a> {
             .par_iter()
             .enumerate()
             .map(|(z, path)| {
-                let slice = Region::z_slab(dims, z..z + 1);
+                let slice = VoxelRange::z_slab(dims, z..z + 1);
                 let values = volume.read_block(0..channels.len(), &slice)?;
                 let layer = self.slice_layer(&values, z, &channels)?;
                 write_atomic(path, |w| {

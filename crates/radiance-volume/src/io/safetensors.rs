@@ -14,8 +14,9 @@ use safetensors::Dtype;
 use super::atomic::write_sized_atomic;
 use crate::error::{io_error, Error, Result};
 use crate::grid::Aabb;
-use crate::source::{z_slabs, Region, VolumeSource};
+use crate::source::{z_slabs, VolumeSource};
 use crate::volume::{default_channel_names, validate_channel_names, RadianceVolume};
+use crate::VoxelRange;
 
 /// The name of the tensor that holds the volume.
 pub const TENSOR_NAME: &str = "volume";
@@ -162,7 +163,7 @@ fn write_safetensors_to(
     put(w, header)?;
     for c in 0..source.channel_count() {
         for z in z_slabs(d, 1, source.slab_values()) {
-            let mut values = source.read_block(c..c + 1, &Region::z_slab(d, z))?;
+            let mut values = source.read_block(c..c + 1, &VoxelRange::z_slab(d, z))?;
             if cfg!(target_endian = "big") {
                 values
                     .iter_mut()

@@ -15,7 +15,8 @@ use rayon::prelude::*;
 use super::bytes::PutBytes;
 use crate::error::{beyond_half, invalid, Result};
 use crate::grid::GridDims;
-use crate::source::{Region, VolumeSource};
+use crate::source::VolumeSource;
+use crate::VoxelRange;
 
 /// Voxels per leaf edge (log2 = 3).
 const LEAF_DIM: usize = 8;
@@ -88,7 +89,7 @@ impl GridValues<'_> {
     }
 
     /// Reads this grid's channels over `region` of `source`.
-    fn read(&self, source: &dyn VolumeSource, region: Region) -> Result<Block> {
+    fn read(&self, source: &dyn VolumeSource, region: VoxelRange) -> Result<Block> {
         Ok(Block {
             values: source.read_block(self.channels.clone(), &region)?,
             region,
@@ -98,7 +99,7 @@ impl GridValues<'_> {
 
 /// Values of some channels over a region, as [`VolumeSource::read_block`] returns them.
 struct Block {
-    region: Region,
+    region: VoxelRange,
     values: Vec<f32>,
 }
 
@@ -113,9 +114,9 @@ impl Block {
 }
 
 /// The voxels of the cube of side `span` at `origin` (index space `(x, y, z)`) inside `dims`.
-fn cube_region(origin: [i32; 3], span: usize, dims: GridDims) -> Region {
+fn cube_region(origin: [i32; 3], span: usize, dims: GridDims) -> VoxelRange {
     let [x, y, z] = origin.map(|c| c as usize);
-    Region {
+    VoxelRange {
         z: z..(z + span).min(dims.d),
         y: y..(y + span).min(dims.h),
         x: x..(x + span).min(dims.w),
@@ -164,7 +165,7 @@ impl Topology {
         for bz0 in (0..blocks[2]).step_by(slab_leaves) {
             let bzs = bz0..(bz0 + slab_leaves).min(blocks[2]);
             let z = bzs.start * LEAF_DIM..(bzs.end * LEAF_DIM).min(dims.d);
-            let slab = density.read(source, Region::z_slab(dims, z))?;
+            let slab = density.read(source, VoxelRange::z_slab(dims, z))?;
             let per_slab = blocks[0] * blocks[1] * bzs.len();
             leaves.par_extend((0..per_slab).into_par_iter().filter_map(|b| {
                 let (bx, by, bz) = (
