@@ -25,6 +25,7 @@ mod scene_boxes;
 mod settings;
 mod to_capture;
 mod train;
+mod view;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.
 #[derive(Debug, Parser)]
@@ -56,6 +57,8 @@ enum Command {
     Sample(sample::SampleArgs),
     /// Animate a generated scene (a smoothed random walk on the finer scales' noise), frame by frame.
     Animate(animate::AnimateArgs),
+    /// Explore a trained model in the browser: a local web server drawing scenes live (WebGL2).
+    View(view::ViewArgs),
     /// Edit a generated scene (remove, duplicate, move boxes) and harmonise it with the generators.
     Edit(edit::EditArgs),
     /// Compose objects of several generated scenes into one and harmonise it with the generators.
@@ -88,6 +91,7 @@ pub fn run() -> ExitCode {
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),
         Command::Animate(args) => animate::run(&args),
+        Command::View(args) => view::run(&args),
         Command::Edit(args) => edit::run(&args),
         Command::Compose(args) => compose::run(&args),
         Command::Demo(args) => demo::run(&args),

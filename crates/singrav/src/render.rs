@@ -47,6 +47,11 @@ impl ViewRenderer {
         self
     }
 
+    /// The volume renderer's settings: sampler, background, density rule, box.
+    pub fn render_config(&self) -> &RenderConfig {
+        &self.config
+    }
+
     /// Also renders opacity (when `with_opacity`): [`ViewRenderer::render_joined`] then appends
     /// it as the critics' last channel and [`ViewRenderer::render_all`] returns it.
     pub fn with_opacity(mut self, with_opacity: bool) -> Self {
