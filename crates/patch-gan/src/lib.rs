@@ -62,6 +62,7 @@ mod fused;
 mod generator;
 mod init;
 mod norm;
+mod pool;
 mod storage;
 mod upsampler;
 mod wgan;
@@ -72,7 +73,7 @@ pub mod functional {
 }
 
 pub use active::ActiveSites;
-pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv2d, Conv3d, ConvConfig};
+pub use conv::{conv2d, conv3d, conv3d_no_bias, Conv, Conv2d, Conv3d, ConvConfig};
 pub use discriminator::{
     receptive_field, PatchDiscriminator, PatchDiscriminator2d, PatchDiscriminator2dConfig,
     PatchDiscriminator3d, PatchDiscriminatorConfig,
