@@ -260,7 +260,7 @@ fn active_geometry(xs: &Shape, kernel: &Shape, sites: &Arc<ActiveSites>) -> Resu
 
 /// The parameters every op carries: zero padding per axis `[D, H, W]` and the stride.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Spec {
+pub(crate) struct Spec {
     padding: [usize; 3],
     stride: usize,
 }

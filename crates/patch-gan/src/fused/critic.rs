@@ -53,6 +53,11 @@ impl Layers {
             .collect()
     }
 
+    /// The first layer's input channels.
+    fn c_in(&self) -> usize {
+        self.kernels.first().map_or(0, |k| k[1])
+    }
+
     /// Values of every kernel, in order.
     fn kernel_lens(&self) -> impl Iterator<Item = usize> + '_ {
         self.kernels.iter().map(|k| k.iter().product())
@@ -182,7 +187,7 @@ fn scalar(grad: &Tensor) -> candle_core::Result<f64> {
 }
 
 /// The tensor of `values` with `shape`, outside the graph.
-fn tensor(values: CpuStorage, shape: &Shape) -> candle_core::Result<Tensor> {
+fn tensor(values: CpuStorage, shape: &Shape) -> Tensor {
     Tensor::from_storage(
         candle_core::Storage::Cpu(values),
         shape.clone(),
@@ -209,7 +214,7 @@ pub(crate) fn critic_loss(
 }
 
 /// Every layer's weight then bias, flattened into one vector, for [`critic_loss`].
-pub(crate) fn pack_interleaved(weights: &[&Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
+pub(crate) fn pack_interleaved(weights: &[Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
     let mut parts = Vec::with_capacity(2 * weights.len());
     for (w, b) in weights.iter().zip(biases) {
         parts.extend([w.flatten_all()?, (*b).clone()]);
@@ -218,7 +223,7 @@ pub(crate) fn pack_interleaved(weights: &[&Tensor], biases: &[&Tensor]) -> candl
 }
 
 /// Every layer's weight, then the hidden layers' biases as constants, for [`penalty`].
-pub(crate) fn pack_weights_first(weights: &[&Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
+pub(crate) fn pack_weights_first(weights: &[Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
     let mut parts = weights
         .iter()
         .map(|w| w.flatten_all())
@@ -237,10 +242,16 @@ impl CriticLoss {
     /// The geometries of a joint batch of `real` and `fake`, after checking the shapes.
     fn geometries(&self, real: &Shape, fake: &Shape, params: &Shape) -> candle_core::Result<(Vec<Geometry>, usize)> {
         let ([nr, c, d, h, w], [nf, ..]) = (dims5(real, "real")?, dims5(fake, "fake")?);
-        if real.dims()[1..] != fake.dims()[1..] || params.elem_count() != self.packing.len {
-            candle_core::bail!("critic loss: real {real:?}, fake {fake:?}, parameters {params:?} do not match");
+        if real.dims()[1..] != fake.dims()[1..]
+            || c != self.layers.c_in()
+            || params.elem_count() != self.packing.len
+        {
+            candle_core::bail!(
+                "critic loss: real {real:?}, fake {fake:?}, parameters {params:?} do not match \
+                 the critic's {} input channels",
+                self.layers.c_in()
+            );
         }
-        let _ = c;
         Ok((self.layers.geometries(nr + nf, [d, h, w]), nr))
     }
 }
@@ -287,11 +298,11 @@ impl CustomOp3 for CriticLoss {
             want_input,
         };
         let mut out = run_pass_on(self.name(), &[real, fake, params], &pass)?.into_iter();
-        let grad_params = tensor(out.next().expect("the parameters' gradient"), params.shape())?;
+        let grad_params = tensor(out.next().expect("the parameters' gradient"), params.shape());
         let (grad_real, grad_fake) = match (out.next(), out.next()) {
             (Some(r), Some(f)) => (
-                real.track_op().then(|| tensor(r, real.shape())).transpose()?,
-                fake.track_op().then(|| tensor(f, fake.shape())).transpose()?,
+                real.track_op().then(|| tensor(r, real.shape())),
+                fake.track_op().then(|| tensor(f, fake.shape())),
             ),
             _ => (None, None),
         };
@@ -444,9 +455,17 @@ struct Penalty {
 impl Penalty {
     /// The geometries of the mixed batch, after checking the shapes.
     fn geometries(&self, real: &Shape, fake: &Shape, params: &Shape) -> candle_core::Result<Vec<Geometry>> {
-        let [n, _, d, h, w] = dims5(real, "real")?;
-        if real != fake || n != self.alphas.len() || params.elem_count() != self.packing.len {
-            candle_core::bail!("gradient penalty: real {real:?}, fake {fake:?}, parameters {params:?} do not match");
+        let [n, c, d, h, w] = dims5(real, "real")?;
+        if real != fake
+            || n != self.alphas.len()
+            || c != self.layers.c_in()
+            || params.elem_count() != self.packing.len
+        {
+            candle_core::bail!(
+                "gradient penalty: real {real:?}, fake {fake:?}, parameters {params:?} do not \
+                 match the critic's {} input channels",
+                self.layers.c_in()
+            );
         }
         Ok(self.layers.geometries(n, [d, h, w]))
     }
@@ -490,7 +509,7 @@ impl CustomOp3 for Penalty {
             grad: scalar(grad)?,
         };
         let mut out = run_pass_on(self.name(), &[params], &pass)?;
-        Ok((None, None, Some(tensor(out.remove(0), params.shape())?)))
+        Ok((None, None, Some(tensor(out.remove(0), params.shape()))))
     }
 }
 
