@@ -31,7 +31,8 @@ fn texture(dev: &Device) -> candle_core::Result<Tensor> {
         for y in 0..SIZE {
             for x in 0..SIZE {
                 let cell = [x, y, z].map(|i| i / 8);
-                let jitter = |k: usize| ((cell[0] * 7 + cell[1] * 13 + cell[2] * 29 + k) % 5) as f32;
+                let jitter =
+                    |k: usize| ((cell[0] * 7 + cell[1] * 13 + cell[2] * 29 + k) % 5) as f32;
                 let centre = [0, 1, 2].map(|a| (cell[a] * 8) as f32 + 2.0 + jitter(a) * 0.8);
                 let d2: f32 = [x, y, z]
                     .iter()
@@ -40,7 +41,11 @@ fn texture(dev: &Device) -> candle_core::Result<Tensor> {
                     .sum();
                 let inside = d2 < 6.0;
                 let at = (z * SIZE + y) * SIZE + x;
-                let rgb = if inside { [1.0, 0.6, 0.2] } else { [0.1, 0.2, 0.8] };
+                let rgb = if inside {
+                    [1.0, 0.6, 0.2]
+                } else {
+                    [0.1, 0.2, 0.8]
+                };
                 values[at] = if inside { 1.0 } else { -1.0 };
                 for (c, v) in rgb.into_iter().enumerate() {
                     values[(c + 1) * plane + at] = 2.0 * v - 1.0;
@@ -54,7 +59,11 @@ fn texture(dev: &Device) -> candle_core::Result<Tensor> {
 /// The share of a volume's voxels whose density is positive (inside a cell).
 fn cell_share(volume: &Tensor) -> candle_core::Result<f32> {
     let density = volume.narrow(1, 0, 1)?;
-    density.gt(0f32)?.to_dtype(DType::F32)?.mean_all()?.to_scalar()
+    density
+        .gt(0f32)?
+        .to_dtype(DType::F32)?
+        .mean_all()?
+        .to_scalar()
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -68,14 +77,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         channels: 16,
         ..Generator3dConfig::default().with_in_channels(4)
     };
-    let g = Generator3d::new(&g_config, VarBuilder::from_varmap(&g_vars, DType::F32, &dev))?;
+    let g = Generator3d::new(
+        &g_config,
+        VarBuilder::from_varmap(&g_vars, DType::F32, &dev),
+    )?;
     let d_vars = VarMap::new();
     let d_config = PatchDiscriminatorConfig {
         layers: 5,
         channels: 16,
         in_channels: 4,
     };
-    let d = PatchDiscriminator3d::new(&d_config, VarBuilder::from_varmap(&d_vars, DType::F32, &dev))?;
+    let d = PatchDiscriminator3d::new(
+        &d_config,
+        VarBuilder::from_varmap(&d_vars, DType::F32, &dev),
+    )?;
     // The paper's optimiser: Adam, learning rate 5e-4, betas (0.9, 0.999).
     let adam = ParamsAdamW {
         lr: 5e-4,

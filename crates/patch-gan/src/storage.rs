@@ -103,7 +103,9 @@ pub(crate) fn run_pass(
                 .collect::<candle_core::Result<Vec<_>>>()?;
             pass.run::<f64>(&data)
         } else {
-            let dtype = inputs.first().map_or(candle_core::DType::F32, |(s, _)| s.dtype());
+            let dtype = inputs
+                .first()
+                .map_or(candle_core::DType::F32, |(s, _)| s.dtype());
             Err(candle_core::Error::UnsupportedDTypeForOp(dtype, name))
         }
     })

@@ -63,7 +63,10 @@ impl RowKernels for Avx512 {
             assert!(s.len() >= len, "map_into: a source row shorter than {len}");
         }
         for &at in &dst_at {
-            assert!(at + len <= dst32.len(), "map_into: a destination row out of bounds");
+            assert!(
+                at + len <= dst32.len(),
+                "map_into: a destination row out of bounds"
+            );
         }
         let base = dst32.as_mut_ptr();
         // SAFETY: the CPU has AVX-512 F (`self` exists); each source has `len` values and each
@@ -353,7 +356,8 @@ unsafe fn split_rows<const M: usize>(
             let n = available.saturating_sub(LANES * j).min(LANES);
             if n > 0 {
                 // SAFETY: values `start + 16 j ..+ n` lie in `src` (`n` counts those left).
-                *v = unsafe { _mm512_maskz_loadu_ps(lanes(n), src.as_ptr().add(start + LANES * j)) };
+                *v =
+                    unsafe { _mm512_maskz_loadu_ps(lanes(n), src.as_ptr().add(start + LANES * j)) };
             }
         }
         for (p, phase) in split::<M>(v).into_iter().enumerate() {

@@ -193,7 +193,10 @@ fn along_axis<const I: usize, const O: usize>(
             let out_base = i * out_strides[a] + j * out_strides[b];
             map_rows_with(
                 (src, std::array::from_fn(|t| base + t * strides[axis])),
-                (dst, std::array::from_fn(|t| out_base + t * out_strides[axis])),
+                (
+                    dst,
+                    std::array::from_fn(|t| out_base + t * out_strides[axis]),
+                ),
                 width,
                 &map,
             );

@@ -156,7 +156,13 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
             for (i, &chunk) in block.iter().enumerate() {
                 // The block's first chunk writes `du`, the others add to it.
                 let first = i == 0;
-                weight_grad_chunk_in::<T, W, M, N>(build, &pass, &mut scratch, (&mut du, first), chunk);
+                weight_grad_chunk_in::<T, W, M, N>(
+                    build,
+                    &pass,
+                    &mut scratch,
+                    (&mut du, first),
+                    chunk,
+                );
             }
             // SAFETY: the first chunk's products wrote every value of every position.
             unsafe { du.set_len(p * co * ci) };

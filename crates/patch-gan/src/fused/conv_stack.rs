@@ -129,7 +129,10 @@ struct Buffers<T: Element> {
 
 impl<T: Element> Drop for Buffers<T> {
     fn drop(&mut self) {
-        self.convolved.drain(..).chain(self.outputs.drain(..)).for_each(recycle);
+        self.convolved
+            .drain(..)
+            .chain(self.outputs.drain(..))
+            .for_each(recycle);
     }
 }
 
@@ -245,10 +248,16 @@ impl Pass for StackForward<'_> {
             let input = buffers.outputs.last().map_or(xs, |h| h.as_slice());
             let z = plan.forward(input, op.kernel(params, i));
             let (channels, plane) = channels_and_plane(plan.output_shape().dims());
-            let (mean, var): (Vec<f64>, Vec<f64>) =
-                fused::channel_stats(&z, channels, plane).into_iter().unzip();
+            let (mean, var): (Vec<f64>, Vec<f64>) = fused::channel_stats(&z, channels, plane)
+                .into_iter()
+                .unzip();
             let after_kernel = op.starts[i] + op.kernels[i].elem_count();
-            let param = |at: usize| params[at..at + channels].iter().map(|v| v.to_f64()).collect();
+            let param = |at: usize| {
+                params[at..at + channels]
+                    .iter()
+                    .map(|v| v.to_f64())
+                    .collect()
+            };
             let norm = NormParams {
                 inv_std: var.iter().map(|v| 1.0 / (v + op.eps).sqrt()).collect(),
                 mean: mean.clone(),
@@ -314,7 +323,10 @@ impl Pass for StackBackward<'_> {
             }
         };
         if self.want_params {
-            write(op.starts[blocks], &plans[blocks].grad_weight(input(blocks), grad));
+            write(
+                op.starts[blocks],
+                &plans[blocks].grad_weight(input(blocks), grad),
+            );
         }
         let mut grad_h = plans[blocks].grad_input(grad, op.kernel(params, blocks));
         for i in (0..blocks).rev() {
@@ -330,7 +342,10 @@ impl Pass for StackBackward<'_> {
             let (grad_z, gamma_beta) = packed.split_at(z.len());
             if self.want_params {
                 write(op.starts[i], &plans[i].grad_weight(input(i), grad_z));
-                write(op.starts[i] + op.kernels[i].elem_count(), &gamma_beta[..2 * channels]);
+                write(
+                    op.starts[i] + op.kernels[i].elem_count(),
+                    &gamma_beta[..2 * channels],
+                );
             }
             grad_h = if i > 0 || self.want_input {
                 plans[i].grad_input(grad_z, op.kernel(params, i))
@@ -363,9 +378,9 @@ mod tests {
 
     use super::*;
     use crate::conv::op::conv3d;
+    use crate::fused::tests::{assert_same_values_and_gradients, random};
     use crate::fused::{batch_norm_act, NormStats};
     use crate::ConvConfig;
-    use crate::fused::tests::{assert_same_values_and_gradients, random};
 
     /// The stack against its layers run one by one (`conv3d` and `batch_norm_act`): the
     /// same output, statistics and gradients of the input and every parameter, bit for bit (the

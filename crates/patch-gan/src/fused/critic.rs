@@ -214,7 +214,10 @@ pub(crate) fn critic_loss(
 }
 
 /// Every layer's weight then bias, flattened into one vector, for [`critic_loss`].
-pub(crate) fn pack_interleaved(weights: &[Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
+pub(crate) fn pack_interleaved(
+    weights: &[Tensor],
+    biases: &[&Tensor],
+) -> candle_core::Result<Tensor> {
     let mut parts = Vec::with_capacity(2 * weights.len());
     for (w, b) in weights.iter().zip(biases) {
         parts.extend([w.flatten_all()?, (*b).clone()]);
@@ -223,7 +226,10 @@ pub(crate) fn pack_interleaved(weights: &[Tensor], biases: &[&Tensor]) -> candle
 }
 
 /// Every layer's weight, then the hidden layers' biases as constants, for [`penalty`].
-pub(crate) fn pack_weights_first(weights: &[Tensor], biases: &[&Tensor]) -> candle_core::Result<Tensor> {
+pub(crate) fn pack_weights_first(
+    weights: &[Tensor],
+    biases: &[&Tensor],
+) -> candle_core::Result<Tensor> {
     let mut parts = weights
         .iter()
         .map(|w| w.flatten_all())
@@ -240,7 +246,12 @@ struct CriticLoss {
 
 impl CriticLoss {
     /// The geometries of a joint batch of `real` and `fake`, after checking the shapes.
-    fn geometries(&self, real: &Shape, fake: &Shape, params: &Shape) -> candle_core::Result<(Vec<Geometry>, usize)> {
+    fn geometries(
+        &self,
+        real: &Shape,
+        fake: &Shape,
+        params: &Shape,
+    ) -> candle_core::Result<(Vec<Geometry>, usize)> {
         let ([nr, c, d, h, w], [nf, ..]) = (dims5(real, "real")?, dims5(fake, "fake")?);
         if real.dims()[1..] != fake.dims()[1..]
             || c != self.layers.c_in()
@@ -298,7 +309,10 @@ impl CustomOp3 for CriticLoss {
             want_input,
         };
         let mut out = run_pass_on(self.name(), &[real, fake, params], &pass)?.into_iter();
-        let grad_params = tensor(out.next().expect("the parameters' gradient"), params.shape());
+        let grad_params = tensor(
+            out.next().expect("the parameters' gradient"),
+            params.shape(),
+        );
         let (grad_real, grad_fake) = match (out.next(), out.next()) {
             (Some(r), Some(f)) => (
                 real.track_op().then(|| tensor(r, real.shape())),
@@ -397,7 +411,11 @@ impl Pass for LossBackward<'_> {
             let plane = g.output().iter().product();
             let bias_grad = fused::channel_sums(&pre, g.c_out, plane);
             write(&mut grad_params, packing.biases[i], &bias_grad);
-            let input = if i == 0 { x.as_slice() } else { &outputs[i - 1] };
+            let input = if i == 0 {
+                x.as_slice()
+            } else {
+                &outputs[i - 1]
+            };
             let kernel_grad = grid::grad_weight(input, &pre, g);
             write(&mut grad_params, packing.weights[i], &kernel_grad);
             grad = if i > 0 || self.want_input {
@@ -454,7 +472,12 @@ struct Penalty {
 
 impl Penalty {
     /// The geometries of the mixed batch, after checking the shapes.
-    fn geometries(&self, real: &Shape, fake: &Shape, params: &Shape) -> candle_core::Result<Vec<Geometry>> {
+    fn geometries(
+        &self,
+        real: &Shape,
+        fake: &Shape,
+        params: &Shape,
+    ) -> candle_core::Result<Vec<Geometry>> {
         let [n, c, d, h, w] = dims5(real, "real")?;
         if real != fake
             || n != self.alphas.len()
@@ -612,7 +635,11 @@ impl Pass for PenaltyForward<'_> {
         masked.reverse();
         let norms = Norms::of(&geometries[0], op.penalty.norm);
         let value = op.penalty.weight
-            * norms.norms(&grad).iter().map(|m| (m - 1.0).powi(2)).sum::<f64>()
+            * norms
+                .norms(&grad)
+                .iter()
+                .map(|m| (m - 1.0).powi(2))
+                .sum::<f64>()
             / norms.groups() as f64;
         let mut saved = outputs;
         saved.extend(masked);

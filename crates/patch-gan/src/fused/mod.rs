@@ -13,8 +13,8 @@
 mod batch_norm;
 mod channel_sum;
 mod conv_leaky;
-pub(crate) mod critic;
 mod conv_stack;
+pub(crate) mod critic;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
