@@ -681,8 +681,7 @@ impl Pass for PenaltyBackward<'_> {
             grad.push(T::from_f64(factors[norms.group(n, p)] * v.to_f64()));
         }
         // Back along the chain: each layer's transposed convolution, then its mask.
-        for i in 0..tail {
-            let g = &geometries[i];
+        for (i, g) in geometries[..tail].iter().enumerate() {
             let kernel_grad = grid::grad_weight(&grad, &masked[i], g);
             write(&mut grad_params, packing.weights[i], &kernel_grad);
             let along = grid::forward(&grad, weight(params, packing, g, i), g);
