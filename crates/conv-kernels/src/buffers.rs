@@ -6,8 +6,8 @@
 //! heap to the system whenever more than twice that threshold is free there: a multi-megabyte
 //! temporary made and dropped once per step is then faulted in page by page on every step,
 //! zeroed by the kernel each time. Measured before this pool (`perf stat`, a critic step at
-//! 108^2 with its penalty): 21,000 page faults per step without process-wide allocator
-//! settings, 2,400 with them (docs/journal/2026-12-patch-gan-standalone.md). The kernels take
+//! 108^2 with its penalty, on the Intel Xeon of docs/performance-patch-gan.md): 21,000 page
+//! faults per step without process-wide allocator settings, 2,400 with them. The kernels take
 //! their outputs and temporaries from here ([`recycled`]), and what they, or their callers, are
 //! done with comes back through [`recycle`].
 
