@@ -397,12 +397,12 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
             .collect()
     };
     let (plain, holdout) = (cells(lines[2]), cells(lines[3]));
-    assert_eq!(plain.len(), 14, "{text}");
+    assert_eq!(plain.len(), 16, "{text}");
     assert_eq!(plain[0], path(&run));
     assert_eq!(holdout[0], path(&held));
     // No held-out views and no SIFID-MV in the plain run: dashes.
     assert_eq!(
-        (plain[5].as_str(), plain[6].as_str(), plain[13].as_str()),
+        (plain[5].as_str(), plain[6].as_str(), plain[15].as_str()),
         ("-", "-", "-")
     );
     assert_eq!(holdout[5], format!("{held_psnr:.2}"));
@@ -413,7 +413,7 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     // Two scenes leave too few for Diversity-MV's jackknife: its value alone.
     assert!(report["diversity_mv_stderr"].is_null(), "{report}");
     let diversity = report["diversity_mv"].as_f64().unwrap();
-    assert_eq!(holdout[12], format!("{diversity:.4}"));
+    assert_eq!(holdout[14], format!("{diversity:.4}"));
     // The layout distance, with its standard error.
     assert_eq!(report["layout_reference"], "vstar");
     let layout = report["layout_distance"].as_f64().unwrap();
@@ -557,7 +557,7 @@ fn the_family_row_scores_other_layouts_and_vary_from_is_checked() {
         lines[4].starts_with("| family: 1 other layouts of `stones` | - |"),
         "{text}"
     );
-    assert_eq!(lines[4].matches('|').count(), 15, "{text}");
+    assert_eq!(lines[4].matches('|').count(), 17, "{text}");
 
     // A dataset that records no built-in scene has no family.
     record.as_object_mut().unwrap().remove("volgen_scene");

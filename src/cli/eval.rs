@@ -222,6 +222,23 @@ fn print_report(e: &Evaluation) {
     if let Some(v_star) = e.reconstruction_misplaced_matter {
         println!("reconstruction_misplaced:  {v_star:.4}  (V*'s own matter out of place against the fit)");
     }
+    let objects = |o: &singrav::eval::ObjectCount| {
+        format!("{} (largest holds {:.3})", o.count, o.largest_share)
+    };
+    println!(
+        "scene objects:             {} in the {}{}",
+        objects(&e.reference_objects),
+        match e.layout_reference.as_str() {
+            "fit" => "fit",
+            _ => "V*",
+        },
+        e.true_objects
+            .as_ref()
+            .map_or(String::new(), |truth| format!(
+                ", {} in the built-in scene itself",
+                objects(truth)
+            ))
+    );
     println!(
         "                           (± one standard error over the {} scenes: their sampling \
          noise, not a difference between runs)",
@@ -277,6 +294,17 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
         cell(Some(e.misplaced_matter), e.misplaced_matter_stderr, 4)
     );
     println!(
+        "objects:                   {}  (separate solid things above the ground; largest holds {} \
+         of the object matter, at most {:.3})",
+        cell(Some(e.objects), e.objects_stderr, 2),
+        cell(
+            Some(e.largest_object_share),
+            e.largest_object_share_stderr,
+            3
+        ),
+        e.largest_object_share_max
+    );
+    println!(
         "Diversity-MV:              {}  (higher = more varied scenes)",
         cell(e.diversity_mv, e.diversity_mv_stderr, 4)
     );
@@ -298,8 +326,9 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
 fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
-         patch SWD-MV | colour SWD | floaters | layout | misplaced | Diversity-MV | SIFID-MV |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         patch SWD-MV | colour SWD | floaters | layout | misplaced | objects | largest object | \
+         Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
         let cells: Vec<String> = columns(&e.numbers)
@@ -370,13 +399,19 @@ fn columns(e: &Evaluation) -> Vec<Column> {
 }
 
 /// The sample metrics' columns of the table.
-fn sample_columns(e: &SceneScores) -> [Column; 7] {
+fn sample_columns(e: &SceneScores) -> [Column; 9] {
     [
         (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
         (Some(e.colour_swd), e.colour_swd_stderr, 4),
         (e.floaters, e.floaters_stderr, 4),
         (Some(e.layout_distance), e.layout_distance_stderr, 4),
         (Some(e.misplaced_matter), e.misplaced_matter_stderr, 4),
+        (Some(e.objects), e.objects_stderr, 2),
+        (
+            Some(e.largest_object_share),
+            e.largest_object_share_stderr,
+            3,
+        ),
         (e.diversity_mv, e.diversity_mv_stderr, 4),
         (e.sifid_mv, None, 4),
     ]

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use radiance_volume::RadianceVolume;
+use radiance_volume::{RadianceVolume, VolumeSource};
 
 use super::to_capture::CaptureFrame;
 
@@ -91,29 +91,23 @@ pub fn run(args: &ExportArgs) -> Result<()> {
 }
 
 /// Writes `volume` as OpenVDB with the encoding `args`, saying what it wrote.
-pub fn write_vdb(volume: &RadianceVolume, path: &std::path::Path, args: &Encoding) -> Result<()> {
+pub fn write_vdb(volume: &dyn VolumeSource, path: &std::path::Path, args: &Encoding) -> Result<()> {
     write_vdb_placed(volume, path, args, None)
 }
 
 /// [`write_vdb`], the grid placed by the affine map `placed` when given.
 #[cfg(feature = "vdb")]
 pub fn write_vdb_placed(
-    volume: &RadianceVolume,
+    volume: &dyn VolumeSource,
     path: &std::path::Path,
     args: &Encoding,
     placed: Option<glam::DMat4>,
 ) -> Result<()> {
-    let mut writer = volume.write_vdb();
+    let mut writer = vdb_writer(volume, args);
     if let Some(map) = placed {
         writer = writer.placed(map);
     }
-    let stats = writer
-        .half(args.half)
-        .zlib(args.zlib)
-        .threshold(args.threshold)
-        .feature_grids(args.feature_grids)
-        .replace_non_finite(args.replace_non_finite)
-        .to_file(path)?;
+    let stats = writer.to_file(path)?;
     println!(
         "wrote {} ({} leaves, {} active voxels, {} bytes)",
         path.display(),
@@ -124,9 +118,36 @@ pub fn write_vdb_placed(
     Ok(())
 }
 
+/// The bytes [`write_vdb`] writes for `volume` (for `volgen view`'s downloads).
+#[cfg(feature = "vdb")]
+pub fn vdb_bytes(volume: &dyn VolumeSource, args: &Encoding) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    vdb_writer(volume, args).to_writer(&mut bytes)?;
+    Ok(bytes)
+}
+
+/// The OpenVDB writer of `volume` with the encoding `args`.
+#[cfg(feature = "vdb")]
+fn vdb_writer<'a>(
+    volume: &'a dyn VolumeSource,
+    args: &Encoding,
+) -> radiance_volume::io::VdbWriter<'a> {
+    radiance_volume::io::VdbWriter::new(volume)
+        .half(args.half)
+        .zlib(args.zlib)
+        .threshold(args.threshold)
+        .feature_grids(args.feature_grids)
+        .replace_non_finite(args.replace_non_finite)
+}
+
+#[cfg(not(feature = "vdb"))]
+pub fn vdb_bytes(_: &dyn VolumeSource, _: &Encoding) -> Result<Vec<u8>> {
+    bail!("this volgen was built without the `vdb` feature; rebuild with `--features vdb`")
+}
+
 #[cfg(not(feature = "vdb"))]
 pub fn write_vdb_placed(
-    _: &RadianceVolume,
+    _: &dyn VolumeSource,
     _: &std::path::Path,
     _: &Encoding,
     _: Option<glam::DMat4>,
@@ -136,14 +157,13 @@ pub fn write_vdb_placed(
 
 #[cfg(feature = "exr")]
 pub fn write_exr_slices(
-    volume: &RadianceVolume,
+    volume: &dyn VolumeSource,
     dir: &std::path::Path,
     name: &str,
     args: &Encoding,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let files = volume
-        .write_exr_slices()
+    let files = radiance_volume::io::ExrSlicesWriter::new(volume)
         .half(args.half)
         .replace_non_finite(args.replace_non_finite)
         .to_dir(dir, name)?;
@@ -157,7 +177,7 @@ pub fn write_exr_slices(
 
 #[cfg(not(feature = "exr"))]
 pub fn write_exr_slices(
-    _: &RadianceVolume,
+    _: &dyn VolumeSource,
     _: &std::path::Path,
     _: &str,
     _: &Encoding,

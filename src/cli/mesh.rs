@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use radiance_volume::RadianceVolume;
+use radiance_volume::{RadianceVolume, VolumeSource};
 use volume_mesh::{Mesh, MeshFormat, MeshOptions, DEFAULT_LEVEL};
 
 use super::to_capture::CaptureFrame;
@@ -157,16 +157,16 @@ pub fn run(args: &MeshArgs) -> Result<()> {
 
 /// The surface of `volume` as `shape` asks, written to `path` (its extension picks the
 /// format).
-pub fn write_mesh(volume: &RadianceVolume, path: &Path, shape: MeshShape) -> Result<Mesh> {
+pub fn write_mesh(volume: &dyn VolumeSource, path: &Path, shape: MeshShape) -> Result<Mesh> {
     let mesh = mesh_of(volume, shape)?;
     mesh.write(path)?;
     Ok(mesh)
 }
 
 /// The surface of `volume` as `shape` asks.
-fn mesh_of(volume: &RadianceVolume, shape: MeshShape) -> Result<Mesh> {
+pub fn mesh_of(volume: &dyn VolumeSource, shape: MeshShape) -> Result<Mesh> {
     Ok(
-        Mesh::from_volume(volume, &MeshOptions { level: shape.level })?
+        Mesh::from_source(volume, &MeshOptions { level: shape.level })?
             .smoothed(shape.smooth)
             .decimated(shape.decimate)?,
     )

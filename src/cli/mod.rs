@@ -24,6 +24,7 @@ mod scene;
 mod scene_boxes;
 mod to_capture;
 mod train;
+mod view;
 
 /// volgen: generative radiance volumes (SinGRAV) and their building blocks.
 #[derive(Debug, Parser)]
@@ -55,6 +56,8 @@ enum Command {
     Sample(sample::SampleArgs),
     /// Animate a generated scene (a smoothed random walk on the finer scales' noise), frame by frame.
     Animate(animate::AnimateArgs),
+    /// Explore a trained model in the browser: a local web server drawing scenes live (WebGL2).
+    View(view::ViewArgs),
     /// Edit a generated scene (remove, duplicate, move boxes) and harmonise it with the generators.
     Edit(edit::EditArgs),
     /// Compose objects of several generated scenes into one and harmonise it with the generators.
@@ -87,6 +90,7 @@ pub fn run() -> ExitCode {
         Command::Train(args) => train::run(&args),
         Command::Sample(args) => sample::run(&args),
         Command::Animate(args) => animate::run(&args),
+        Command::View(args) => view::run(&args),
         Command::Edit(args) => edit::run(&args),
         Command::Compose(args) => compose::run(&args),
         Command::Demo(args) => demo::run(&args),

@@ -6,13 +6,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use candle_core::Tensor;
-use radiance_volume::RadianceVolume;
+use radiance_volume::{Resampled, VolumeSource};
 use singrav::SinGrav;
 
 use super::export::{write_exr_slices, write_vdb, Encoding};
 
 /// Extra formats each generated volume is written in, beside its safetensors file and PNG.
-#[derive(Debug, Clone, Copy, clap::Args)]
+/// The default is the flags' defaults: no extra format, the default upsampling.
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
 pub struct Outputs {
     /// Also write each volume as OpenVDB (density and color grids).
     #[arg(long)]
@@ -53,9 +54,9 @@ impl Outputs {
     }
 
     /// The physical volume written for a raw volume `(1, 4, s, s, s)` of `model`, at
-    /// [`Outputs::upsample`]'s resolution.
-    pub fn volume(&self, model: &SinGrav, raw: &Tensor) -> Result<RadianceVolume> {
-        Ok(model.to_physical_upsampled(raw, self.upsample(model))?)
+    /// [`Outputs::upsample`]'s resolution, computed block by block as the writers stream it.
+    pub fn volume(&self, model: &SinGrav, raw: &Tensor) -> Result<Resampled> {
+        Ok(model.physical_source(raw, self.upsample(model))?)
     }
 }
 
@@ -88,12 +89,12 @@ pub fn load_model(path: &Path) -> Result<SinGrav> {
 pub fn write_scene(
     dir: &Path,
     stem: &str,
-    volume: &RadianceVolume,
+    volume: &dyn VolumeSource,
     views: &Tensor,
     outputs: Outputs,
 ) -> Result<PathBuf> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    volume.save_safetensors(dir.join(format!("{stem}.safetensors")))?;
+    radiance_volume::io::write_safetensors(volume, dir.join(format!("{stem}.safetensors")))?;
     let row = (0..views.dim(0)?)
         .map(|v| views.get(v))
         .collect::<candle_core::Result<Vec<_>>>()?;

@@ -33,6 +33,10 @@ pub struct RenderArgs {
     /// Do not skip empty space (results are the same; only slower).
     #[arg(long)]
     no_skip: bool,
+    /// Colour seen where rays leave the volume, each in [0, 1] (default black): a SinGRAV
+    /// run renders on its configuration's `rendering.background` (white for the presets).
+    #[arg(long, value_name = "R,G,B", value_parser = background)]
+    background: Option<[f32; 3]>,
     /// Output directory for `<frame>.exr` (R, G, B, A = opacity, Z = depth) and `<frame>.png`.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -52,6 +56,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .with_sampler(sampler)
         .with_epsilon(args.epsilon)
         .with_skip_empty(!args.no_skip);
+    let cfg = match args.background {
+        Some(colour) => cfg.with_background(colour),
+        None => cfg,
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     for (i, frame) in frames.iter().enumerate() {
@@ -81,4 +89,18 @@ fn frame_stem(file_path: Option<&str>, index: usize) -> String {
         .map(|s| s.to_string_lossy().into_owned())
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| format!("view_{index:03}"))
+}
+
+/// Parses `--background R,G,B`: three numbers in [0, 1].
+fn background(text: &str) -> std::result::Result<[f32; 3], String> {
+    let expected = || format!("expected three numbers R,G,B in [0, 1], got {text:?}");
+    let parts = text
+        .split(',')
+        .map(|part| part.trim().parse::<f32>())
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|_| expected())?;
+    match <[f32; 3]>::try_from(parts) {
+        Ok(colour) if colour.iter().all(|c| (0.0..=1.0).contains(c)) => Ok(colour),
+        _ => Err(expected()),
+    }
 }

@@ -52,8 +52,8 @@ pub struct TrainArgs {
 /// Training settings shared by `train` and `demo`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct TrainOptions {
-    /// Preset: paper (GPU), small (216^2, about 11 minutes on 2 cores), tiny (108^2, about 10)
-    /// or micro (seconds).
+    /// Preset: paper and paper-island (GPU), hd (the paper's 126^3 and 320^2, about 40 minutes
+    /// on 2 cores), small (216^2, about 11), tiny (108^2, about 10) or micro (seconds).
     #[arg(long, default_value = "tiny")]
     pub preset: String,
     /// Continue a killed run from its last checkpoint (with the same settings; a run whose

@@ -6,6 +6,8 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+pub mod view;
+
 /// Runs the `volgen` binary built for these tests.
 pub fn volgen(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_volgen"))

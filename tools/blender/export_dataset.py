@@ -142,7 +142,38 @@ def save(scene, path, media_type, file_format, **settings):
     image_settings.file_format = file_format
     for key, value in settings.items():
         setattr(image_settings, key, value)
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
+    # Through a temporary name (same extension, which Blender's writers go by): a file under
+    # its final name is complete.
+    root, extension = os.path.splitext(path)
+    partial = f"{root}.partial{extension}"
+    bpy.data.images["Render Result"].save_render(filepath=partial, scene=scene)
+    os.replace(partial, path)
+
+
+def claim_output(out, args):
+    """Record the settings that decide the views in OUT/export_settings.json, or check them
+    against an earlier, killed export's: resuming with other settings would mix two datasets."""
+    settings = {
+        "blend": os.path.abspath(args.blend) if getattr(args, "blend", None) else None,
+        "size": args.size,
+        "samples": args.samples,
+        "views": args.views,
+        "seed": args.seed,
+        "cameras": args.cameras,
+    }
+    path = os.path.join(out, "export_settings.json")
+    if os.path.exists(path):
+        with open(path) as f:
+            earlier = json.load(f)
+        if earlier != settings:
+            sys.exit(
+                f"error: {out} holds an export made with other settings ({path}: {earlier}, "
+                f"this export: {settings}); give another --out or delete it"
+            )
+        return
+    with open(path + ".tmp", "w") as f:
+        json.dump(settings, f, indent=2)
+    os.replace(path + ".tmp", path)
 
 
 def main():
@@ -181,22 +212,27 @@ def main():
     out = os.path.abspath(args.out)
     os.makedirs(os.path.join(out, "images"), exist_ok=True)
     os.makedirs(os.path.join(out, "depth"), exist_ok=True)
+    claim_output(out, args)
     frames = []
     for i, matrix in enumerate(matrices):
+        colour, depth = f"images/r_{i:03d}.png", f"depth/r_{i:03d}.exr"
+        frame = {
+            "file_path": colour,
+            "depth_file_path": depth,
+            "transform_matrix": [list(row) for row in matrix],
+        }
+        frames.append(frame)
+        # Both files are written atomically, the colour last: its presence means the view is
+        # complete, so a killed export resumes where it stopped.
+        if os.path.exists(os.path.join(out, colour)):
+            print(f"view {i + 1}/{len(matrices)} kept from an earlier run", flush=True)
+            continue
         camera.matrix_world = matrix
         bpy.ops.render.render(write_still=False)
-        colour, depth = f"images/r_{i:03d}.png", f"depth/r_{i:03d}.exr"
         # The multilayer EXR holds every pass; volgen reads the channel ending in `.Z`.
         save(scene, os.path.join(out, depth), "MULTI_LAYER_IMAGE", "OPEN_EXR_MULTILAYER",
              color_depth="32", exr_codec="ZIP")
         save(scene, os.path.join(out, colour), "IMAGE", "PNG", color_mode="RGBA", color_depth="8")
-        frames.append(
-            {
-                "file_path": colour,
-                "depth_file_path": depth,
-                "transform_matrix": [list(row) for row in matrix],
-            }
-        )
         print(f"view {i + 1}/{len(matrices)} rendered", flush=True)
     transforms = {
         "camera_angle_x": fov_x,

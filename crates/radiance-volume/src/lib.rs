@@ -38,6 +38,7 @@ mod mask;
 mod occupancy;
 mod resample;
 pub mod sample;
+mod source;
 mod volume;
 
 pub use activation::Activation;
@@ -46,7 +47,8 @@ pub use error::{Error, Result};
 pub use grid::{Aabb, GridDims, VoxelGrid};
 pub use mask::dilate_mask;
 pub use occupancy::OccupancyGrid;
-pub use resample::resample_tensor;
+pub use resample::{resample_tensor, Resampled};
+pub use source::{z_slabs, SlabLimit, VolumeSource, SLAB_VALUES};
 pub use volume::{RadianceVolume, BASE_CHANNELS};
 
 /// The types most users need, for `use radiance_volume::prelude::*`.

@@ -1,12 +1,18 @@
 //! Resampling between resolutions over the same box: trilinear between cell centres, applied as
 //! three separable interpolation matrices, so it runs on any device and is differentiable.
 
-use candle_core::{Device, Tensor};
+use std::ops::Range;
 
+use candle_core::{Device, Tensor};
+use rayon::prelude::*;
+
+use crate::activation::Activation;
 use crate::error::{invalid, Result};
-use crate::grid::GridDims;
+use crate::grid::{GridDims, VoxelGrid};
 use crate::sample::AxisLerp;
+use crate::source::{check_channels, VolumeSource};
 use crate::volume::RadianceVolume;
+use crate::VoxelRange;
 
 /// Returns the `(n_out, n_in)` matrix that linearly interpolates a cell-centred axis of `n_in`
 /// cells at the centres of `n_out` cells over the same extent (edge-clamped).
@@ -91,5 +97,158 @@ impl RadianceVolume {
         let scale = |n: usize| ((n as f32 * factor).round() as usize).max(1);
         let d = self.dims();
         self.resample(GridDims::new(scale(d.d), scale(d.h), scale(d.w)))
+    }
+}
+
+/// A volume resampled to another grid over the same box, computed block by block when read
+/// ([`VolumeSource`]): every cell holds the trilinear interpolation of the volume's cell centres
+/// at its own centre, with [`RadianceVolume::resample`]'s weights (the same values to float
+/// rounding: that one multiplies matrices, this one computes each cell alone, so that a cell
+/// gets the same bits in blocks of any shape and a file streamed block by block is the file of
+/// the whole), and, with
+/// [`Resampled::with_density_activation`], channel 0 is then mapped through the activation's
+/// density (post-activated density: interpolate raw density, then activate).
+///
+/// A block reads only the cells of the volume it interpolates from, so writers can stream a
+/// volume 27 times larger than the source (`factor` 3) through a small buffer.
+///
+/// ```
+/// use radiance_volume::{Aabb, Activation, GridDims, RadianceVolume, VoxelRange, Resampled, VolumeSource};
+/// let v = RadianceVolume::from_fn(GridDims::cube(4), Aabb::CUBE, 4, |p, out| {
+///     out.copy_from_slice(&[p.x, 0.5, 0.5, 0.5]);
+/// })?;
+/// let fine = Resampled::finer(v, 3)?.with_density_activation(Activation::default());
+/// assert_eq!(fine.dims(), GridDims::cube(12));
+/// // Fine cell x = 4 sits on the centre of coarse cell 1 (x = -0.25): softplus(-0.25).
+/// let sigma = fine.read_block(0..1, &VoxelRange { z: 0..1, y: 0..1, x: 4..5 })?[0];
+/// assert!((sigma - (1.0 + (-0.25f32).exp()).ln()).abs() < 1e-6);
+/// # Ok::<(), radiance_volume::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct Resampled {
+    volume: RadianceVolume,
+    dims: GridDims,
+    density: Option<Activation>,
+}
+
+impl Resampled {
+    /// `volume` on a grid of `dims` cells over its box (a volume's clone shares its memory).
+    pub fn new(volume: RadianceVolume, dims: GridDims) -> Result<Self> {
+        dims.validate()?;
+        Ok(Self {
+            volume,
+            dims,
+            density: None,
+        })
+    }
+
+    /// `volume` on a grid `factor` times finer along every axis (`factor >= 1`).
+    pub fn finer(volume: RadianceVolume, factor: usize) -> Result<Self> {
+        let d = volume.dims();
+        Self::new(
+            volume,
+            GridDims::new(d.d * factor, d.h * factor, d.w * factor),
+        )
+    }
+
+    /// Maps interpolated channel 0 (raw density) through `activation`'s density.
+    #[must_use]
+    pub fn with_density_activation(self, activation: Activation) -> Self {
+        Self {
+            density: Some(activation),
+            ..self
+        }
+    }
+
+    /// Computes the whole volume at once (as much memory as its cells need).
+    pub fn to_volume(&self) -> Result<RadianceVolume> {
+        let values = self.read_block(0..self.channel_count(), &VoxelRange::all(self.dims))?;
+        let d = self.dims;
+        let shape = (self.channel_count(), d.d, d.h, d.w);
+        let data = Tensor::from_vec(values, shape, self.volume.tensor().device())?;
+        self.volume.with_tensor(data)
+    }
+}
+
+impl VolumeSource for Resampled {
+    fn grid(&self) -> VoxelGrid {
+        VoxelGrid {
+            aabb: self.volume.aabb(),
+            dims: self.dims,
+        }
+    }
+
+    fn channel_names(&self) -> &[String] {
+        self.volume.channel_names()
+    }
+
+    fn read_block(&self, channels: Range<usize>, region: &VoxelRange) -> Result<Vec<f32>> {
+        region.validate(self.dims)?;
+        check_channels(&channels, self.channel_count())?;
+        let coarse = self.volume.dims();
+        let lerps = [
+            axis_lerps(coarse.w, self.dims.w, region.x.clone()),
+            axis_lerps(coarse.h, self.dims.h, region.y.clone()),
+            axis_lerps(coarse.d, self.dims.d, region.z.clone()),
+        ];
+        let out_dims = region.dims();
+        let plane = out_dims.h * out_dims.w;
+        let mut out = vec![0f32; channels.len() * out_dims.voxel_count()];
+        self.volume.with_values(|values| {
+            out.par_chunks_mut(plane).enumerate().for_each(|(i, dst)| {
+                let (c, z) = (channels.start + i / out_dims.d, i % out_dims.d);
+                let channel = &values[c * coarse.voxel_count()..][..coarse.voxel_count()];
+                interpolate_plane(channel, coarse, &lerps, z, dst);
+            });
+        })?;
+        if let (Some(activation), 0) = (self.density, channels.start) {
+            let n = out_dims.voxel_count();
+            let sigma = Tensor::from_slice(&out[..n], n, &Device::Cpu)?;
+            let sigma: Vec<f32> = activation.apply_density(&sigma)?.to_vec1()?;
+            out[..n].copy_from_slice(&sigma);
+        }
+        Ok(out)
+    }
+}
+
+/// The trilinear taps of output cells `rows` on an axis of `n_out` cells over `n_in` input
+/// cells (cell-centred, edge-clamped): the same weights as [`interpolation_matrix`]'s rows.
+fn axis_lerps(n_in: usize, n_out: usize, rows: Range<usize>) -> Vec<AxisLerp> {
+    let ratio = n_in as f32 / n_out as f32;
+    rows.map(|j| AxisLerp::new((j as f32 + 0.5) * ratio - 0.5, n_in))
+        .collect()
+}
+
+/// `a (1 - t) + b t`, and exactly `a` at `t = 0` (a cell on an input centre is a copy of it,
+/// even beside an infinity).
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    if t == 0.0 {
+        a
+    } else {
+        a * (1.0 - t) + b * t
+    }
+}
+
+/// Fills `dst` (one output plane, `(y, x)` row-major) with the interpolation of one channel
+/// `(D, H, W)` of `dims` at output plane `z` of the block whose taps `[x, y, z]` are `lerps`:
+/// along x first, then y, then z, each output value computed alone in that order, so a voxel
+/// gets the same bits in a block of any shape.
+fn interpolate_plane(
+    channel: &[f32],
+    dims: GridDims,
+    [lx, ly, lz]: &[Vec<AxisLerp>; 3],
+    z: usize,
+    dst: &mut [f32],
+) {
+    let tz = lz[z];
+    let along_x = |zi: usize, yi: usize, l: &AxisLerp| {
+        let row = &channel[dims.index(zi, yi, 0)..][..dims.w];
+        lerp(row[l.i0], row[l.i1], l.t)
+    };
+    for (ty, out_row) in ly.iter().zip(dst.chunks_exact_mut(lx.len())) {
+        for (tx, out) in lx.iter().zip(out_row) {
+            let at_z = |zi: usize| lerp(along_x(zi, ty.i0, tx), along_x(zi, ty.i1, tx), ty.t);
+            *out = lerp(at_z(tz.i0), at_z(tz.i1), tz.t);
+        }
     }
 }

@@ -5,9 +5,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::activation::Activation;
-use crate::error::{invalid, Error, Result};
+use crate::error::{invalid, Result};
 use crate::grid::{Aabb, GridDims, VoxelGrid};
 use crate::sample::sample_into;
+use crate::source::VolumeSource;
 
 /// The names of the four physical channels every volume starts with.
 pub const BASE_CHANNELS: [&str; 4] = ["sigma", "r", "g", "b"];
@@ -217,25 +218,7 @@ impl RadianceVolume {
 
     /// Returns an error naming the first non-finite value (channel and voxel) and the count.
     pub fn check_finite(&self, what: &str) -> Result<()> {
-        let dims = self.dims();
-        let names = &self.channel_names;
-        self.with_values(|values| {
-            let count = values.iter().filter(|v| !v.is_finite()).count();
-            if count == 0 {
-                return Ok(());
-            }
-            let at = values.iter().position(|v| !v.is_finite()).unwrap_or(0);
-            let (c, i) = (at / dims.voxel_count(), at % dims.voxel_count());
-            let (z, y, x) = (i / (dims.h * dims.w), (i / dims.w) % dims.h, i % dims.w);
-            Err(Error::NonFinite {
-                what: what.to_string(),
-                count,
-                first: format!(
-                    "channel {c} ({}), voxel (d={z}, h={y}, w={x}) = {}",
-                    names[c], values[at]
-                ),
-            })
-        })?
+        self.check_finite_channels(what, 0..self.channel_count())
     }
 }
 

@@ -18,6 +18,8 @@
 //!   the same by kind of matter ([`MatterKinds`]), each kind with an equal say;
 //!   [`MatterSupport::misplaced`]: the share of a volume's matter standing where the scene has
 //!   no matter of its kind nearby (matter out of place, which true variants of a scene avoid).
+//! - [`Objects`]: the separate things standing on a volume's ground (face-connected solid
+//!   matter above it), counted and sized: neighbouring stones run together count as one.
 //! - [`Estimate`]: a metric over scenes with its standard error over scenes (per-scene values
 //!   from [`floaters_per_scene`], [`colour_swd_per_scene`], [`patch_swd_per_scene`]; a
 //!   jackknife for [`diversity_mv`]).
@@ -35,6 +37,7 @@ mod inception;
 mod layout;
 mod matter_kinds;
 mod misplaced;
+mod objects;
 mod patch_swd;
 mod psnr;
 mod sifid;
@@ -53,6 +56,9 @@ pub use inception::InceptionBlock1;
 pub use layout::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
 pub use matter_kinds::{kind_layout_distance, kind_layout_distances, MatterKinds, MATTER_KINDS};
 pub use misplaced::{MatterSupport, MISPLACED_KINDS, MISPLACED_REACH};
+pub use objects::{
+    Object, ObjectRule, Objects, OBJECT_CLEARANCE, OBJECT_DENSITY, OBJECT_GROUND_WINDOW,
+};
 pub use patch_swd::{
     patch_swd_mv, patch_swd_per_scene, PATCH_SWD_DIRECTIONS, PATCH_SWD_MIN_SIDE, PATCH_SWD_SEED,
 };

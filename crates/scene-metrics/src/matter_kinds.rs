@@ -96,6 +96,11 @@ impl MatterKinds {
         &self.colours
     }
 
+    /// The kind whose colour is nearest `colour` (RGB).
+    pub(crate) fn nearest(&self, colour: &[f64; 3]) -> usize {
+        nearest(&self.colours, colour)
+    }
+
     /// `points` shared out among the kinds: one point set per kind, each point weighted by its
     /// weight times its share of that kind, renormalised per kind.
     fn split(&self, points: &LayoutPoints) -> Vec<LayoutPoints> {

@@ -47,6 +47,11 @@ impl ViewRenderer {
         self
     }
 
+    /// The volume renderer's settings: sampler, background, density rule, box.
+    pub fn render_config(&self) -> &RenderConfig {
+        &self.config
+    }
+
     /// Also renders opacity (when `with_opacity`): [`ViewRenderer::render_joined`] then appends
     /// it as the critics' last channel and [`ViewRenderer::render_all`] returns it.
     pub fn with_opacity(mut self, with_opacity: bool) -> Self {
@@ -105,16 +110,7 @@ impl ViewRenderer {
             origins.extend_from_slice(rays.origins());
             dirs.extend_from_slice(rays.dirs());
         }
-        let rays = Rays::new(origins, dirs)?;
-        // On the CPU the fused kernel renders; on another device volrender's portable path (candle
-        // ops), so the volume stays where it is. A post-activating renderer takes raw density
-        // and activates it per sample.
-        let raw = raw.squeeze(0)?;
-        let physical = match config.density {
-            DensityInterpolation::Physical => self.activation.apply(&raw)?,
-            DensityInterpolation::PostActivated { .. } => self.activation.apply_colour(&raw)?,
-        };
-        let out = render(&physical, &rays, &config)?;
+        let out = self.render_rays(raw, &Rays::new(origins, dirs)?, config)?;
         let views = cameras.len();
         let rgb = out
             .rgb
@@ -122,16 +118,59 @@ impl ViewRenderer {
             .permute((0, 3, 1, 2))?
             .contiguous()?;
         let plane = |t: Tensor| -> Result<Tensor> { Ok(t.reshape((views, 1, h, w))?) };
-        let depth = match out.depth {
-            Some(d) => Some((plane(d)? / f64::from(self.depth_norm))?),
-            None => None,
-        };
-        let opacity = out.opacity.map(plane).transpose()?;
         Ok(OptionalMaps {
             rgb,
-            depth,
-            opacity,
+            depth: out.depth.map(plane).transpose()?,
+            opacity: out.opacity.map(plane).transpose()?,
         })
+    }
+
+    /// Renders `raw` along the rays through `pixels`, each `(camera, row-major pixel index)`,
+    /// with every output this renderer was configured for: colour `(P, 3)`, and depth (divided
+    /// by the depth normaliser) and opacity `(P, 1)` when asked for. A loss on a random set of
+    /// pixels over many views costs what its pixels cost, not what whole views do.
+    pub fn render_pixels(&self, raw: &Tensor, pixels: &[(&Camera, usize)]) -> Result<OptionalMaps> {
+        if pixels.is_empty() {
+            return Err(invalid("pixels", "need at least one pixel"));
+        }
+        let (origins, dirs) = pixels
+            .iter()
+            .map(|&(camera, pixel)| {
+                let (row, col) = (pixel / camera.width, pixel % camera.width);
+                let (origin, dir) = camera.ray(row as f32 + 0.5, col as f32 + 0.5);
+                (origin.to_array(), dir.to_array())
+            })
+            .unzip();
+        let out = self.render_rays(raw, &Rays::new(origins, dirs)?, self.config)?;
+        let column = |t: Tensor| -> Result<Tensor> { Ok(t.unsqueeze(1)?) };
+        Ok(OptionalMaps {
+            rgb: out.rgb,
+            depth: out.depth.map(column).transpose()?,
+            opacity: out.opacity.map(column).transpose()?,
+        })
+    }
+
+    /// One pass of the render op along `rays` with `config`'s outputs (depth divided by the
+    /// depth normaliser). On the CPU the fused kernel renders; on another device volrender's
+    /// portable path (candle ops), so the volume stays where it is. A post-activating renderer
+    /// takes raw density and activates it per sample.
+    fn render_rays(
+        &self,
+        raw: &Tensor,
+        rays: &Rays,
+        config: RenderConfig,
+    ) -> Result<volrender::RenderOutput> {
+        let raw = raw.squeeze(0)?;
+        let physical = match config.density {
+            DensityInterpolation::Physical => self.activation.apply(&raw)?,
+            DensityInterpolation::PostActivated { .. } => self.activation.apply_colour(&raw)?,
+        };
+        let mut out = render(&physical, rays, &config)?;
+        out.depth = out
+            .depth
+            .map(|d| d / f64::from(self.depth_norm))
+            .transpose()?;
+        Ok(out)
     }
 
     /// Renders and joins colour, depth and opacity into the critics' `(V, C, h, w)` input:
@@ -159,13 +198,100 @@ pub struct ViewMaps {
     pub opacity: Tensor,
 }
 
-/// [`ViewMaps`] with the outputs a render configuration may leave out.
+/// [`ViewMaps`] with the outputs a render configuration may leave out: of whole views
+/// (`(V, C, h, w)`), or of single pixels (`(P, C)`, [`ViewRenderer::render_pixels`]).
 #[derive(Debug, Clone)]
 pub struct OptionalMaps {
-    /// Colour `(V, 3, h, w)`, composited on the background.
+    /// Colour `(V, 3, h, w)` or `(P, 3)`, composited on the background.
     pub rgb: Tensor,
-    /// Normalised expected depth `(V, 1, h, w)`, when rendered.
+    /// Normalised expected depth `(V, 1, h, w)` or `(P, 1)`, when rendered.
     pub depth: Option<Tensor>,
-    /// Opacity `(V, 1, h, w)`, when rendered.
+    /// Opacity `(V, 1, h, w)` or `(P, 1)`, when rendered.
     pub opacity: Option<Tensor>,
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{Device, Tensor, Var};
+    use glam::Vec3;
+    use volrender::Camera;
+
+    use super::ViewRenderer;
+    use crate::config::TrainConfig;
+
+    /// Rendering single pixels gives exactly those pixels of the whole views, with their
+    /// gradient: what the reconstruction loss on random pixels relies on.
+    #[test]
+    fn pixels_render_as_the_same_pixels_of_whole_views() {
+        let device = Device::Cpu;
+        let config = TrainConfig::preset("micro").unwrap();
+        let renderer = ViewRenderer::new(&config, 24, 4.0, true).with_opacity(true);
+        let cameras = [
+            Camera::look_at(Vec3::new(0.3, 0.8, 3.0), Vec3::ZERO, Vec3::Y, 7, 7, 0.8).unwrap(),
+            Camera::look_at(Vec3::new(-2.0, 1.0, 1.5), Vec3::ZERO, Vec3::Z, 7, 7, 0.8).unwrap(),
+        ];
+        let raw =
+            Var::from_tensor(&Tensor::rand(-3f32, 3.0, (1, 4, 6, 6, 6), &device).unwrap()).unwrap();
+        let views = renderer
+            .render_all(raw.as_tensor(), &[&cameras[0], &cameras[1]])
+            .unwrap();
+        let chosen = [(1, 0), (0, 48), (1, 24), (0, 3)];
+        let pixels: Vec<_> = chosen.iter().map(|&(v, p)| (&cameras[v], p)).collect();
+        let single = renderer.render_pixels(raw.as_tensor(), &pixels).unwrap();
+        let at = |maps: &Tensor, v: usize, p: usize| -> Vec<f32> {
+            let channels = maps.dim(1).unwrap();
+            (0..channels)
+                .map(|c| {
+                    maps.get(v)
+                        .unwrap()
+                        .get(c)
+                        .unwrap()
+                        .flatten_all()
+                        .unwrap()
+                        .to_vec1::<f32>()
+                        .unwrap()[p]
+                })
+                .collect()
+        };
+        let depth = single.depth.as_ref().unwrap();
+        let opacity = single.opacity.as_ref().unwrap();
+        for (i, &(v, p)) in chosen.iter().enumerate() {
+            let row = |t: &Tensor| t.get(i).unwrap().to_vec1::<f32>().unwrap();
+            assert_eq!(row(&single.rgb), at(&views.rgb, v, p));
+            assert_eq!(row(depth), at(views.depth.as_ref().unwrap(), v, p));
+            assert_eq!(row(opacity), at(views.opacity.as_ref().unwrap(), v, p));
+        }
+        // A loss on those pixels of the whole views has the same gradient.
+        let picked = |maps: &Tensor| -> Tensor {
+            let columns: Vec<Tensor> = chosen
+                .iter()
+                .map(|&(v, p)| {
+                    let (c, h, w) = maps.get(v).unwrap().dims3().unwrap();
+                    maps.get(v)
+                        .unwrap()
+                        .reshape((c, h * w))
+                        .unwrap()
+                        .narrow(1, p, 1)
+                        .unwrap()
+                })
+                .collect();
+            Tensor::cat(&columns, 1).unwrap()
+        };
+        let whole = picked(&views.rgb).sqr().unwrap().sum_all().unwrap();
+        let part = single.rgb.sqr().unwrap().sum_all().unwrap();
+        let (g_whole, g_part) = (whole.backward().unwrap(), part.backward().unwrap());
+        let grad = |g: &candle_core::backprop::GradStore| -> Vec<f32> {
+            g.get(raw.as_tensor())
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap()
+        };
+        let (a, b) = (grad(&g_whole), grad(&g_part));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-6 * (1.0 + x.abs()), "{x} against {y}");
+        }
+        assert!(renderer.render_pixels(raw.as_tensor(), &[]).is_err());
+    }
 }

@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use glam::Vec3;
-use radiance_volume::{Aabb, Activation, RadianceVolume};
-use volrender::{Camera, DensityInterpolation, PAPER_FOV_DEG, PAPER_RADIUS};
+use radiance_volume::{Aabb, Activation, RadianceVolume, Resampled};
+use volrender::{Camera, DensityInterpolation, RenderConfig, PAPER_FOV_DEG, PAPER_RADIUS};
 
 use crate::checkpoint::{checkpoint_path, Checkpoint, TrainState};
 use crate::error::{Error, Result};
@@ -27,6 +27,27 @@ pub struct Sample {
     pub views: Tensor,
     /// Seconds to generate the volume (the 3D pyramid and the activation; no rendering).
     pub generation_seconds: f64,
+}
+
+/// The most rays one renderer call takes (and so the most pixels, doubled per side, one
+/// upsampler call takes) when a model renders many views ([`SinGrav::render_raw`],
+/// [`SinGrav::render_maps`]): the upsampler's activations and the renderer's buffers grow with
+/// the views of a call: an `hd` sample's 39 views (3 shown, a 36-frame turntable) at 320^2
+/// would otherwise go through the upsampler's 3x3 convolutions at once.
+pub const RAYS_PER_CALL: usize = 1 << 16;
+
+/// Splits `cameras` into consecutive runs of at most [`RAYS_PER_CALL`] rays, at least one camera
+/// each: the views of one renderer and upsampler call.
+///
+/// ```
+/// let cams = singrav::sample::showcase_cameras(7, 160)?;
+/// let runs: Vec<usize> = singrav::sample::view_chunks(&cams).map(|c| c.len()).collect();
+/// assert_eq!(runs, vec![2, 2, 2, 1]); // 160^2 rays per view, 2^16 per call
+/// # Ok::<(), singrav::Error>(())
+/// ```
+pub fn view_chunks(cameras: &[Camera]) -> impl Iterator<Item = &[Camera]> {
+    let rays = cameras.first().map_or(1, |c| c.width * c.height).max(1);
+    cameras.chunks((RAYS_PER_CALL / rays).max(1))
 }
 
 /// `count` cameras on the paper's radius at 35 degrees elevation, evenly spaced in azimuth,
@@ -291,19 +312,46 @@ impl SinGrav {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn to_physical_upsampled(&self, raw: &Tensor, factor: usize) -> Result<RadianceVolume> {
+        Ok(self.physical_source(raw, factor)?.to_volume()?)
+    }
+
+    /// [`SinGrav::to_physical_upsampled`] computed block by block when read, for the writers
+    /// that stream a volume (`radiance_volume::io::write_safetensors`, `VdbWriter::new`, ...):
+    /// at `factor` 3 an `hd` scene's 378^3 volume (0.9 GB) is never held whole.
+    ///
+    /// ```
+    /// use candle_core::{DType, Device, Tensor};
+    /// use radiance_volume::VolumeSource;
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let model = singrav::SinGrav::new(&config, &Device::Cpu, &mut rng)?;
+    /// let raw = Tensor::zeros((1, 4, 3, 3, 3), DType::F32, &Device::Cpu)?;
+    /// let fine = model.physical_source(&raw, 5)?;
+    /// assert_eq!(fine.dims(), radiance_volume::GridDims::cube(15));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn physical_source(&self, raw: &Tensor, factor: usize) -> Result<Resampled> {
         if factor == 1 {
-            return self.to_physical(raw);
+            let volume = self.to_physical(raw)?;
+            let dims = volume.dims();
+            return Ok(Resampled::new(volume, dims)?);
         }
         let (rendered, density) = self.to_rendered(raw)?;
-        crate::export::physical_upsampled(&rendered, density, factor)
+        crate::export::physical_upsampled_source(&rendered, density, factor)
     }
 
     /// Renderings `(V, 3, H, W)` of a raw volume of the finest 3D scale from `cameras` (sized
     /// [`SinGrav::render_size`]), doubled by the upsampler G_N when it is trained.
     pub fn render_raw(&self, raw: &Tensor, cameras: &[Camera]) -> Result<Tensor> {
-        let refs: Vec<&Camera> = cameras.iter().collect();
-        let (coarse, _) = self.final_renderer().render(raw, &refs)?;
-        self.finish_views(coarse)
+        let renderer = self.final_renderer();
+        let views = view_chunks(cameras)
+            .map(|chunk| {
+                let refs: Vec<&Camera> = chunk.iter().collect();
+                self.finish_views(renderer.render(raw, &refs)?.0)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Tensor::cat(&views, 0)?)
     }
 
     /// Like [`SinGrav::render_raw`], with the expected depth in world units and the opacity of
@@ -320,11 +368,27 @@ impl SinGrav {
     /// # Ok::<(), singrav::Error>(())
     /// ```
     pub fn render_maps(&self, raw: &Tensor, cameras: &[Camera]) -> Result<ViewMaps> {
-        let refs: Vec<&Camera> = cameras.iter().collect();
-        let maps = self.final_renderer().render_maps(raw, &refs)?;
+        let renderer = self.final_renderer();
+        let chunks = view_chunks(cameras)
+            .map(|chunk| {
+                let refs: Vec<&Camera> = chunk.iter().collect();
+                let maps = renderer.render_maps(raw, &refs)?;
+                Ok(ViewMaps {
+                    rgb: self.finish_views(maps.rgb)?,
+                    ..maps
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let join = |part: fn(&ViewMaps) -> &Tensor| -> Result<Tensor> {
+            Ok(Tensor::cat(
+                &chunks.iter().map(part).collect::<Vec<_>>(),
+                0,
+            )?)
+        };
         Ok(ViewMaps {
-            rgb: self.finish_views(maps.rgb)?,
-            ..maps
+            rgb: join(|m| &m.rgb)?,
+            depth: join(|m| &m.depth)?,
+            opacity: join(|m| &m.opacity)?,
         })
     }
 
@@ -351,6 +415,28 @@ impl SinGrav {
         }
     }
 
+    /// The settings [`SinGrav::render_raw`] renders scenes with before the upsampler: the
+    /// finest 3D scale's uniform samples per ray (grown with the box at another
+    /// [extent](SinGrav::set_extent)), the background and the density rule, over
+    /// [`SinGrav::model_box`] in the model's units. A renderer outside the model (a viewer)
+    /// takes the samples and background from here and the volume and density rule from
+    /// [`SinGrav::to_rendered`], which are in the scene's coordinates.
+    ///
+    /// ```
+    /// use rand::SeedableRng;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let mut model = singrav::SinGrav::new(&config, &candle_core::Device::Cpu, &mut rng)?;
+    /// model.push_generator(1.0, &mut rng)?;
+    /// let settings = model.render_config();
+    /// assert_eq!(settings.sampler, volrender::Sampler::Uniform { samples: config.pyramid.samples[0] });
+    /// assert_eq!(settings.background, Some(config.rendering.background));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn render_config(&self) -> RenderConfig {
+        *self.final_renderer().render_config()
+    }
+
     /// The renderer of the finest 3D scale, depth in world units.
     fn final_renderer(&self) -> ViewRenderer {
         let last = self.volume_scales();
@@ -364,10 +450,12 @@ impl SinGrav {
     }
 
     /// Colour renderings of the 3D pyramid as the model outputs them: doubled by G_N when it
-    /// is trained, clamped to [0, 1].
+    /// is trained, clamped to [0, 1], detached: G_N's weights are variables, so its output
+    /// would otherwise hold every activation of its pass for a backward that never comes
+    /// (about 0.4 GB per scene of four 320^2 views, which `volgen eval`'s 32 scenes kept).
     fn finish_views(&self, coarse: Tensor) -> Result<Tensor> {
         if self.has_upsampler() {
-            Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?)
+            Ok(self.upsample_images(&coarse)?.clamp(0f32, 1f32)?.detach())
         } else {
             Ok(coarse)
         }

@@ -62,8 +62,9 @@ pub use sliced::{
     sliced_wasserstein, sliced_wasserstein_per_projection, sliced_wasserstein_resampled, Metric,
 };
 pub use texture::{
-    FeatureExtractor, FeatureMap, Padding, PatchPyramid, PatchPyramidConfig, Pooling, PyramidKind,
-    Slices, TextureLoss, TextureLossConfig, TextureTarget, Vgg19, Vgg19Config, VggLayer,
+    FeatureExtractor, FeatureMap, Padding, PatchPyramid, PatchPyramidConfig, Points, Pooling,
+    PyramidKind, Slices, TextureLoss, TextureLossConfig, TextureTarget, Vgg19, Vgg19Config,
+    VggLayer,
 };
 
 /// The main types, for `use swd_loss::prelude::*`.

@@ -7,7 +7,7 @@ use common::{check_gradient, matrix, pseudo_random_rows};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use swd_loss::{
-    sliced_wasserstein, Metric, PatchPyramid, PatchPyramidConfig, Projections, PyramidKind,
+    sliced_wasserstein, Metric, PatchPyramid, PatchPyramidConfig, Points, Projections, PyramidKind,
     TextureLoss, TextureLossConfig,
 };
 
@@ -72,4 +72,29 @@ fn texture_loss_gradient_matches_finite_differences() {
             loss.loss_with_projections(g, &tgt, &proj).unwrap()
         });
     }
+}
+
+/// With a seeded generator the random patch subsets are fixed (they never depend on the
+/// values), so the subsampled loss is a function of the pixels whose gradient must match.
+#[test]
+fn subsampled_texture_loss_gradient_matches_finite_differences() {
+    let dev = Device::Cpu;
+    let image = |n: usize, s: usize, seed: u64| {
+        let rows = pseudo_random_rows(n * 3 * s, s, seed, 0.5, 0.5);
+        Tensor::from_vec(rows.concat(), (n, 3, s, s), &dev).unwrap()
+    };
+    let generated = image(2, 10, 31);
+    let target = image(2, 12, 32);
+    let entries: Vec<usize> = (0..generated.elem_count()).step_by(5).collect();
+    let config = PatchPyramidConfig::default().with_levels(2).with_patch(3);
+    let loss = TextureLoss::new(
+        PatchPyramid::new(config).unwrap(),
+        TextureLossConfig::default().with_points(Points::Random(20)),
+    )
+    .unwrap();
+    let tgt = loss.target(&target).unwrap();
+    check_gradient_loss(&generated, &entries, |g| {
+        loss.loss(g, &tgt, &mut ChaCha8Rng::seed_from_u64(8))
+            .unwrap()
+    });
 }

@@ -7,7 +7,7 @@ use common::{assert_rel_close, pseudo_random_rows};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use swd_loss::{
-    sliced_wasserstein, Error, FeatureExtractor, Metric, PatchPyramid, PatchPyramidConfig,
+    sliced_wasserstein, Error, FeatureExtractor, Metric, PatchPyramid, PatchPyramidConfig, Points,
     PyramidKind, Slices, TextureLoss, TextureLossConfig,
 };
 
@@ -273,4 +273,124 @@ fn bad_images_are_errors() {
         .loss(&nan, &target, &mut ChaCha8Rng::seed_from_u64(0))
         .unwrap_err();
     assert!(matches!(err, Error::NonFinite { .. }), "{err}");
+}
+
+/// Rows `positions` of an `(N, C)` point set.
+fn rows(points: &Tensor, positions: &[usize]) -> Tensor {
+    let index: Vec<u32> = positions.iter().map(|&i| i as u32).collect();
+    let index = Tensor::from_vec(index, positions.len(), &Device::Cpu).unwrap();
+    points.index_select(&index, 0).unwrap()
+}
+
+/// The subsampled loss is the sliced distance between the explicitly unfolded patches at the
+/// drawn positions: directions first (as `draw_projections`), then per level a sorted uniform
+/// subset of the generated batch's positions and one of the target's, from the same generator.
+/// With at least as many points as a level holds, every point is used and the loss is the full
+/// one along the same directions.
+#[test]
+fn random_points_are_a_uniform_subset_per_level() {
+    let pyr = pyramid(2, 3, PyramidKind::Laplacian);
+    let (gen, tgt) = (image(2, 9, 10, 41), image(1, 11, 9, 42));
+    let n = 13;
+    let loss = TextureLoss::new(
+        pyr,
+        TextureLossConfig::default()
+            .with_slices(Slices::Fixed(6))
+            .with_points(Points::Random(n)),
+    )
+    .unwrap();
+    let target = loss.target(&tgt).unwrap();
+    let got = scalar(
+        &loss
+            .loss(&gen, &target, &mut ChaCha8Rng::seed_from_u64(3))
+            .unwrap(),
+    );
+
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let proj = loss.draw_projections(&target, &mut rng).unwrap();
+    let (gen_levels, tgt_levels) = (pyr.levels(&gen).unwrap(), pyr.levels(&tgt).unwrap());
+    let mut draw = |total: usize| -> Vec<usize> {
+        if n >= total {
+            return (0..total).collect();
+        }
+        let mut picked = rand::seq::index::sample(&mut rng, total, n).into_vec();
+        picked.sort_unstable();
+        picked
+    };
+    let mut want = 0.0;
+    let mut subsets = Vec::new();
+    for l in 0..2 {
+        let all_gen: Vec<Tensor> = (0..2)
+            .map(|b| explicit_patches(&gen_levels[l], b, 3))
+            .collect();
+        let all_tgt = explicit_patches(&tgt_levels[l], 0, 3);
+        let g = draw(all_gen[0].dim(0).unwrap());
+        let t = draw(all_tgt.dim(0).unwrap());
+        subsets.push((g.len(), t.len()));
+        for x in &all_gen {
+            let d = sliced_wasserstein(
+                &rows(x, &g),
+                &rows(&all_tgt, &t),
+                &proj[l],
+                Metric::SquaredW2,
+            );
+            want += scalar(&d.unwrap()) / 2.0;
+        }
+    }
+    // Level 0 (9x10 and 11x9 images: 56 and 63 patches) is subsampled, level 1 (9 and 12
+    // patches) is not.
+    assert_eq!(subsets, vec![(n, n), (9, 12)]);
+    assert_rel_close(got, want, 1e-10, "subsampled loss");
+
+    let everything = TextureLoss::new(
+        pyr,
+        TextureLossConfig::default()
+            .with_slices(Slices::Fixed(6))
+            .with_points(Points::Random(1000)),
+    )
+    .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let proj = everything.draw_projections(&target, &mut rng).unwrap();
+    let full = scalar(
+        &everything
+            .loss_with_projections(&gen, &target, &proj)
+            .unwrap(),
+    );
+    let sampled = everything
+        .loss(&gen, &target, &mut ChaCha8Rng::seed_from_u64(3))
+        .unwrap();
+    assert_eq!(scalar(&sampled), full);
+}
+
+/// A target of many images, selected per step, gives the loss of the target made of the
+/// selected images.
+#[test]
+fn selected_targets_equal_targets_of_the_selection() {
+    let loss = TextureLoss::new(
+        pyramid(2, 3, PyramidKind::Laplacian),
+        TextureLossConfig::default(),
+    )
+    .unwrap();
+    let views = image(4, 12, 12, 43);
+    let all = loss.target(&views).unwrap();
+    let gen = image(2, 12, 12, 44);
+    let picked = [3usize, 1];
+    let index = Tensor::new(&[3u32, 1], &Device::Cpu).unwrap();
+    let direct = loss
+        .target(&views.index_select(&index, 0).unwrap())
+        .unwrap();
+    let proj = loss
+        .draw_projections(&direct, &mut ChaCha8Rng::seed_from_u64(1))
+        .unwrap();
+    let a = scalar(
+        &loss
+            .loss_with_projections(&gen, &all.select(&picked).unwrap(), &proj)
+            .unwrap(),
+    );
+    let b = scalar(&loss.loss_with_projections(&gen, &direct, &proj).unwrap());
+    assert_eq!(a, b);
+    assert!(all.select(&[4]).is_err());
+    assert!(all.select(&[]).is_err());
+    let none = TextureLossConfig::default().with_points(Points::Random(0));
+    assert!(TextureLoss::new(pyramid(2, 3, PyramidKind::Laplacian), none).is_err());
 }

@@ -3,7 +3,7 @@
 
 use std::f64::consts::PI;
 
-use radiance_volume::{Aabb, GridDims, RadianceVolume};
+use radiance_volume::{Aabb, GridDims, RadianceVolume, Resampled, SlabLimit};
 use volume_mesh::{srgb_to_linear, Error, Mesh, MeshOptions, DEFAULT_LEVEL};
 
 /// Grid edge of the test volumes.
@@ -73,6 +73,24 @@ fn a_ball_gives_a_closed_sphere_of_the_right_area_volume_and_colours() {
             assert!((c[0] - want).abs() < 1e-5, "{c:?} at {p}");
         }
     }
+}
+
+/// A source read block by block gives the mesh of the whole volume, whether it is read in the
+/// usual slabs or one plane at a time (the colours of vertices between two slabs included),
+/// and a volume computed on a finer grid the mesh of that grid held whole.
+#[test]
+fn meshes_of_sources_read_in_slabs_are_the_meshes_of_the_whole() {
+    let v = ball(0.6);
+    let whole = Mesh::from_volume(&v, &MeshOptions::default()).unwrap();
+    let thin = Mesh::from_source(&SlabLimit::new(&v, 1), &MeshOptions::default()).unwrap();
+    assert_eq!(thin, whole);
+
+    let fine = Resampled::finer(v, 2).unwrap();
+    let held = Mesh::from_volume(&fine.to_volume().unwrap(), &MeshOptions::default()).unwrap();
+    let streamed =
+        Mesh::from_source(&SlabLimit::new(&fine, 5000), &MeshOptions::default()).unwrap();
+    assert_eq!(streamed, held);
+    assert!(held.triangles.len() > 3 * whole.triangles.len());
 }
 
 #[test]

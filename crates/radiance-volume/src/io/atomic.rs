@@ -58,10 +58,22 @@ pub fn write_atomic(
 /// [`Error::Write`] naming `path` and the size when the bytes do not fit (a full disk, a
 /// file-size limit); [`Error::Io`] for other failures.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, |w| w.write_all(bytes).map_err(io_error(path))).map_err(|e| match e {
+    write_sized_atomic(path, bytes.len() as u64, |w| {
+        w.write_all(bytes).map_err(io_error(path))
+    })
+}
+
+/// [`write_atomic`] of a file whose size, `bytes`, is known before it is written: a write that
+/// fails for want of space becomes [`Error::Write`], naming that size.
+pub(crate) fn write_sized_atomic(
+    path: &Path,
+    bytes: u64,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
+) -> Result<()> {
+    write_atomic(path, write).map_err(|e| match e {
         Error::Io { source, .. } if out_of_space(&source) => Error::Write {
             path: path.to_path_buf(),
-            bytes: bytes.len() as u64,
+            bytes,
             source,
         },
         other => other,

@@ -36,7 +36,9 @@ use serde::{Deserialize, Serialize};
 use super::atomic::{check_writable, remove_file_if_exists, write_atomic, write_bytes_atomic};
 use crate::error::{beyond_half, invalid, io_error, Error, Result};
 use crate::grid::{Aabb, GridDims};
+use crate::source::VolumeSource;
 use crate::volume::RadianceVolume;
+use crate::VoxelRange;
 
 /// The value of the sidecar's `format` field.
 pub const SIDECAR_FORMAT: &str = "volgen.exr-slices";
@@ -89,12 +91,13 @@ struct SidecarChannel {
     meaning: String,
 }
 
-/// Writes a [`RadianceVolume`] as a stack of EXR slices; made by
-/// [`RadianceVolume::write_exr_slices`]. Defaults: f32 samples, non-finite values refused.
+/// Writes a volume as a stack of EXR slices; made by [`RadianceVolume::write_exr_slices`], or
+/// by [`ExrSlicesWriter::new`] for any [`VolumeSource`] (read one slice at a time per thread).
+/// Defaults: f32 samples, non-finite values refused.
 #[derive(Debug, Clone)]
 #[must_use = "a writer does nothing until `to_dir` is called"]
 pub struct ExrSlicesWriter<'a> {
-    volume: &'a RadianceVolume,
+    volume: &'a dyn VolumeSource,
     half: bool,
     replace_non_finite: Option<f32>,
 }
@@ -103,11 +106,7 @@ impl RadianceVolume {
     /// Starts an EXR slice export of this volume (see [`ExrSlicesWriter`] and the module docs of
     /// [`crate::io::exr_slices`]).
     pub fn write_exr_slices(&self) -> ExrSlicesWriter<'_> {
-        ExrSlicesWriter {
-            volume: self,
-            half: false,
-            replace_non_finite: None,
-        }
+        ExrSlicesWriter::new(self)
     }
 
     /// Reads a stack written by [`write_exr_slices`](Self::write_exr_slices) (or any stack with a
@@ -169,7 +168,16 @@ impl RadianceVolume {
     }
 }
 
-impl ExrSlicesWriter<'_> {
+impl<'a> ExrSlicesWriter<'a> {
+    /// Starts an EXR slice export of `volume`, with the defaults above.
+    pub fn new(volume: &'a dyn VolumeSource) -> Self {
+        Self {
+            volume,
+            half: false,
+            replace_non_finite: None,
+        }
+    }
+
     /// Stores f16 samples instead of f32; values beyond ±65504 make the export fail.
     pub fn half(self, half: bool) -> Self {
         Self { half, ..self }
@@ -207,7 +215,7 @@ impl ExrSlicesWriter<'_> {
             ));
         }
         if self.replace_non_finite.is_none() {
-            volume.check_finite("volume to export")?;
+            volume.check_finite_channels("volume to export", 0..volume.channel_count())?;
         }
         let channels = self.channels()?;
         let dims = volume.dims();
@@ -217,24 +225,24 @@ impl ExrSlicesWriter<'_> {
         // Over an earlier export the old sidecar goes first; the new one comes last.
         remove_file_if_exists(&sidecar_path)?;
 
-        let written = volume.with_values(|values| {
-            paths
-                .par_iter()
-                .enumerate()
-                .map(|(z, path)| {
-                    let layer = self.slice_layer(values, z, &channels)?;
-                    write_atomic(path, |w| {
-                        Image::from_layer(layer)
-                            .write()
-                            .non_parallel()
-                            .to_buffered(w)
-                            .map_err(|e| exr_write_error(path, e))
-                    })
+        let written = paths
+            .par_iter()
+            .enumerate()
+            .map(|(z, path)| {
+                let slice = VoxelRange::z_slab(dims, z..z + 1);
+                let values = volume.read_block(0..channels.len(), &slice)?;
+                let layer = self.slice_layer(&values, z, &channels)?;
+                write_atomic(path, |w| {
+                    Image::from_layer(layer)
+                        .write()
+                        .non_parallel()
+                        .to_buffered(w)
+                        .map_err(|e| exr_write_error(path, e))
                 })
-                .collect::<Vec<Result<()>>>()
-        })?;
+            })
+            .collect::<Vec<Result<()>>>();
         let result = written.into_iter().collect::<Result<()>>().and_then(|()| {
-            let b = volume.aabb();
+            let b = volume.grid().aabb;
             let sidecar = Sidecar {
                 format: SIDECAR_FORMAT.into(),
                 format_version: SIDECAR_VERSION,
@@ -299,7 +307,7 @@ impl ExrSlicesWriter<'_> {
             .collect()
     }
 
-    /// Builds the EXR layer of slice `z`.
+    /// Builds the EXR layer of slice `z` from its values (every channel of the slice).
     fn slice_layer(
         &self,
         values: &[f32],
@@ -311,8 +319,7 @@ impl ExrSlicesWriter<'_> {
             .iter()
             .enumerate()
             .map(|(c, ch)| {
-                let plane =
-                    &values[c * dims.voxel_count() + z * dims.h * dims.w..][..dims.h * dims.w];
+                let plane = &values[c * dims.h * dims.w..][..dims.h * dims.w];
                 let fixed = (0..dims.h)
                     .rev()
                     .flat_map(|y| &plane[y * dims.w..][..dims.w])

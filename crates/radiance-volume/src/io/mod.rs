@@ -8,6 +8,7 @@ pub mod safetensors;
 #[cfg(feature = "vdb")]
 pub mod vdb;
 
+pub use self::safetensors::{safetensors_bytes, write_safetensors};
 pub use atomic::{check_writable, remove_file_if_exists, write_atomic, write_bytes_atomic};
 #[cfg(feature = "exr")]
 pub use exr_slices::ExrSlicesWriter;

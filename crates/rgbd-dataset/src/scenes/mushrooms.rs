@@ -73,6 +73,12 @@ impl Mushrooms {
         Self { mushrooms }
     }
 
+    /// How many mushrooms stand in the field.
+    #[must_use]
+    pub fn mushroom_count(&self) -> usize {
+        self.mushrooms.len()
+    }
+
     /// The ground height: gentle hummocks of moss.
     fn ground_height(p: Vec2) -> f32 {
         -0.55 + 0.03 * (4.0 * p.x + 1.0).sin() * (3.0 * p.y).cos() - 0.05 * p.length_squared()

@@ -60,6 +60,12 @@ impl StandingStones {
         Self { stones }
     }
 
+    /// How many stones stand in the ring.
+    #[must_use]
+    pub fn stone_count(&self) -> usize {
+        self.stones.len()
+    }
+
     /// The ground height: a low mound with gentle ripples.
     fn ground_height(p: Vec2) -> f32 {
         -0.62

@@ -129,6 +129,36 @@ impl<R: rand::Rng> Animation<'_, R> {
         Ok(self.model.generate(&self.current)?.detach())
     }
 
+    /// Moves past the next `frames` frames without generating them: the next
+    /// [`Animation::next_frame`] returns what it would have returned after `frames` calls (a
+    /// viewer's slider jumps to frame t at the cost of t noise draws, not t generations).
+    ///
+    /// ```
+    /// use rand::SeedableRng;
+    /// use singrav::applications::WalkConfig;
+    /// let config = singrav::TrainConfig::preset("micro")?;
+    /// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    /// let mut model = singrav::SinGrav::new(&config, &candle_core::Device::Cpu, &mut rng)?;
+    /// model.push_generator(1.0, &mut rng)?;
+    /// model.push_generator(0.5, &mut rng)?;
+    /// let rng = || rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    /// let third = model.animation(WalkConfig::default(), rng())?.nth(3).unwrap()?;
+    /// let mut walk = model.animation(WalkConfig::default(), rng())?;
+    /// walk.skip_frames(3)?;
+    /// let skipped = walk.next_frame()?;
+    /// assert_eq!((third - skipped)?.abs()?.max_all()?.to_scalar::<f32>()?, 0.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn skip_frames(&mut self, frames: usize) -> Result<()> {
+        for _ in 0..frames {
+            if self.started {
+                self.step()?;
+            }
+            self.started = true;
+        }
+        Ok(())
+    }
+
     /// Moves the noise one step along the walk.
     fn step(&mut self) -> Result<()> {
         let scales = self.current.len();

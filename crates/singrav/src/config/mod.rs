@@ -89,6 +89,12 @@ pub struct Pyramid {
     pub channels: usize,
     /// Feature widths of the upsampler G_N (32, 16, 8, 8 in the paper).
     pub upsampler_widths: [usize; 4],
+    /// Edge of the volume fitted to the views before training, when the run compares with one
+    /// ([`Losses::fitted`], [`Losses::volume_critic`]); `None`: the finest 3D scale's edge
+    /// (twice that without [`Rendering::post_activation`]). A 3D critic that judges only the
+    /// coarsest scales needs no finer fit than theirs.
+    #[serde(default)]
+    pub fit_size: Option<usize>,
 }
 
 /// How long and how each scale trains.
@@ -122,6 +128,13 @@ pub struct Schedule {
     /// gets a direct fit's per-voxel freedom while generated scenes stay exactly what the
     /// generators make. 0 (the paper's V*): no such fit.
     pub reconstruction_fit_steps: usize,
+    /// Pixels the reconstruction loss renders per generator step at the 3D scales, drawn at
+    /// random over every training view, where its views per step
+    /// ([`ScaleViews::reconstruction`]) hold more: the loss then costs what this many rays cost
+    /// at the finest scales, and each step sees every view a little rather than a few views
+    /// whole. `None`: whole views at every scale.
+    #[serde(default)]
+    pub reconstruction_pixels: Option<usize>,
 }
 
 /// The loss weights. 0 leaves a term out.
@@ -387,10 +400,10 @@ impl TrainConfig {
     /// The direct fit a training run compares with ([`Losses::fitted`]) when it is given none:
     /// the run's activation, density rule, background, depth and seed, over the model's cube
     /// (in the scene's coordinates under the run's `bounds`), with volume-fit's default budget.
-    /// The grid is the finest 3D scale's own edge for post-activated runs, which compare raw
-    /// density (resampling a finer grid would average it away from the direct fit of that
-    /// grid), and twice it otherwise (per-voxel opacity resampled from a finer grid is a
-    /// smoother target).
+    /// The grid is [`Pyramid::fit_size`] when set, else the finest 3D scale's own edge for
+    /// post-activated runs, which compare raw density (resampling a finer grid would average it
+    /// away from the direct fit of that grid), and twice it otherwise (per-voxel opacity
+    /// resampled from a finer grid is a smoother target).
     ///
     /// ```
     /// let tiny = singrav::TrainConfig::preset("tiny")?;
@@ -402,8 +415,9 @@ impl TrainConfig {
     pub fn fit_config(&self) -> volume_fit::FitConfig {
         let finest = self.pyramid.volume_sizes.last().copied().unwrap_or(16);
         let post_activation = self.rendering.post_activation;
+        let finest_rule = if post_activation { finest } else { 2 * finest };
         volume_fit::FitConfig {
-            size: if post_activation { finest } else { 2 * finest },
+            size: self.pyramid.fit_size.unwrap_or(finest_rule),
             activation: self.activation(),
             background: self.rendering.background,
             use_depth: self.ablations.use_depth,

@@ -21,6 +21,25 @@ const TINY_ITERATIONS: [usize; 4] = [720, 480, 480, 80];
 /// train within 12 minutes on 2 cores.
 const SMALL_ITERATIONS: [usize; 5] = [720, 160, 120, 64, 40];
 
+/// Iterations per scale of the `hd` preset: the coarsest scale's 720, where the layout forms
+/// (at 16^3 as cheap as `tiny`'s), then fewer as an iteration grows dearer.
+const HD_ITERATIONS: [usize; 8] = [720, 240, 200, 160, 100, 60, 40, 40];
+
+/// The `hd` preset's 3D scales: volumes from [`CPU_COARSEST_VOLUME`] to the paper's finest
+/// (126^3), renderings from 32^2 to the paper's finest (160^2, so final pictures of 320^2).
+const HD_SCALES: usize = 7;
+const HD_FINEST_VOLUME: usize = 126;
+const HD_IMAGES: (usize, usize) = (32, 160);
+const HD_SAMPLES: (usize, usize) = (48, 128);
+
+/// Pixels of `hd`'s reconstruction per generator step, drawn over every view: as many as two
+/// of its finest renderings hold (160^2), where its 8 reconstruction views would hold 204,800.
+const HD_RECONSTRUCTION_PIXELS: usize = 2 * 160 * 160;
+
+/// The edge `hd` fits its views at for its 3D critic, which judges only the coarsest 16^3
+/// volumes: its fourth scale's, where a fit at the finest (126^3) would take several minutes.
+const HD_FIT_SIZE: usize = 45;
+
 /// Edge of the coarsest volume of `tiny` and `small`: the networks' 11-voxel fields (L = 5)
 /// span 11/16 of it. `small` had 24^3 (11/24): with `tiny`'s 3D critic and 720 coarsest
 /// iterations a quarter of the stones' matter still stood inside their ring (26.1%), at 16^3
@@ -102,7 +121,8 @@ const IMAGE_GROWTH: f64 = 1.5;
 
 impl TrainConfig {
     /// The names [`TrainConfig::preset`] accepts.
-    pub const PRESETS: [&'static str; 5] = ["paper", "paper-island", "small", "tiny", "micro"];
+    pub const PRESETS: [&'static str; 6] =
+        ["paper", "paper-island", "hd", "small", "tiny", "micro"];
 
     /// A named preset:
     ///
@@ -112,6 +132,10 @@ impl TrainConfig {
     ///   samples. Needs a GPU (see docs/training.md).
     /// - `paper-island`: the table's Island row: L = 5, renderings 25..160, 6, 6, 6, 6, 3, 2
     ///   generated views.
+    /// - `hd`: the paper's resolution on a CPU: N = 8, volumes ramping from 16^3 to 126^3,
+    ///   renderings from 32^2 to 160^2 (final 320^2), `small`'s recipe (16 channels, L = 5,
+    ///   `tiny`'s training recipe, 3D critic of the coarsest volumes and post-activated
+    ///   density) with a schedule of its own and its fit at 45^3.
     /// - `small`: N = 5, volumes 16, 32, 43, 57, renderings 32..108 (final 216^2), 16 channels,
     ///   `tiny`'s training recipe, 3D critic and post-activated density without its
     ///   binary-opacity prior, and a schedule of its own (fewest iterations at the costly fine
@@ -138,6 +162,19 @@ impl TrainConfig {
                 island.pyramid.image_sizes = geometric(25, (160.0f64 / 25.0).powf(0.25), 5);
                 island.schedule.scale_views = Some(table_views(&ISLAND_VIEWS));
                 Ok(island)
+            }
+            "hd" => {
+                let sizes = ramped(
+                    "hd",
+                    HD_SCALES,
+                    (CPU_COARSEST_VOLUME, HD_FINEST_VOLUME),
+                    HD_IMAGES,
+                    HD_SAMPLES,
+                );
+                let mut hd = cpu_recipe(sizes, &HD_ITERATIONS);
+                hd.pyramid.fit_size = Some(HD_FIT_SIZE);
+                hd.schedule.reconstruction_pixels = Some(HD_RECONSTRUCTION_PIXELS);
+                Ok(arranged_and_sharp(hd))
             }
             "small" => {
                 let mut small = cpu_recipe(scaled("small", 5, 24, 32), &SMALL_ITERATIONS);
@@ -187,6 +224,7 @@ fn paper() -> TrainConfig {
             layers: 7,
             channels: 32,
             upsampler_widths: [32, 16, 8, 8],
+            fit_size: None,
         },
         schedule: Schedule {
             scales: uniform_schedule(2000, 6),
@@ -197,6 +235,7 @@ fn paper() -> TrainConfig {
             learning_rate: 5e-4,
             betas: (0.9, 0.999),
             reconstruction_fit_steps: 0,
+            reconstruction_pixels: None,
         },
         losses: Losses {
             rgb: 10.0,
@@ -264,9 +303,27 @@ fn scaled(preset: &str, scales: usize, volume: usize, image: usize) -> TrainConf
         layers: 5,
         channels: 16,
         upsampler_widths: [16, 16, 8, 8],
+        fit_size: None,
     };
     config.schedule.views_per_step = 4;
     config.schedule.scale_views = None;
+    config
+}
+
+/// The paper's model as [`scaled`] makes it, at `scales` 3D scales whose volumes, renderings
+/// and samples per ray run from the first to the last of each pair: volumes and renderings
+/// geometrically ([`ramp`]), samples linearly.
+fn ramped(
+    preset: &str,
+    scales: usize,
+    volumes: (usize, usize),
+    images: (usize, usize),
+    samples: (usize, usize),
+) -> TrainConfig {
+    let mut config = scaled(preset, scales + 1, volumes.0, images.0);
+    config.pyramid.volume_sizes = ramp(volumes.0, volumes.1, scales);
+    config.pyramid.image_sizes = ramp(images.0, images.1, scales);
+    config.pyramid.samples = sample_ramp(samples.0, samples.1, scales);
     config
 }
 
@@ -329,6 +386,16 @@ fn geometric(first: usize, growth: f64, count: usize) -> Vec<usize> {
     (0..count)
         .map(|i| (first as f64 * growth.powi(i as i32)).round() as usize)
         .collect()
+}
+
+/// `count` sizes from `first` to `last` (both included), each the same factor times the
+/// previous, rounded.
+fn ramp(first: usize, last: usize, count: usize) -> Vec<usize> {
+    if count == 1 {
+        return vec![last];
+    }
+    let growth = (last as f64 / first as f64).powf(1.0 / (count - 1) as f64);
+    geometric(first, growth, count)
 }
 
 /// Samples per ray rising linearly from `first` at the coarsest scale to `last` at the finest.
@@ -409,6 +476,47 @@ mod tests {
             let config = TrainConfig::preset(name).unwrap();
             assert_eq!(config.losses.volume_critic, 0.0, "{name}");
         }
+    }
+
+    #[test]
+    fn hd_has_the_papers_finest_sizes_on_ramps_and_smalls_recipe() {
+        let (hd, small) = (
+            TrainConfig::preset("hd").unwrap(),
+            TrainConfig::preset("small").unwrap(),
+        );
+        hd.validate().unwrap();
+        assert_eq!(hd.pyramid.volume_sizes, [16, 23, 32, 45, 63, 89, 126]);
+        assert_eq!(hd.pyramid.image_sizes, [32, 42, 55, 72, 94, 122, 160]);
+        assert_eq!(hd.pyramid.samples, [48, 61, 74, 88, 101, 114, 128]);
+        assert_eq!(hd.final_image_size(), 320);
+        assert_eq!(hd.scales(), 8);
+        // Each size the previous one times a constant factor, rounded.
+        for sizes in [&hd.pyramid.volume_sizes, &hd.pyramid.image_sizes] {
+            let growth = (*sizes.last().unwrap() as f64 / sizes[0] as f64).powf(1.0 / 6.0);
+            for (i, &size) in sizes.iter().enumerate() {
+                let exact = sizes[0] as f64 * growth.powi(i as i32);
+                assert!((size as f64 - exact).abs() <= 0.5, "{sizes:?}");
+            }
+        }
+        let iterations: Vec<_> = hd.schedule.scales.iter().map(|s| s.iterations).collect();
+        assert_eq!(iterations, [720, 240, 200, 160, 100, 60, 40, 40]);
+        assert!(hd
+            .schedule
+            .scales
+            .iter()
+            .all(|s| s.reconstruction_only * 4 == s.iterations));
+        assert_eq!(hd.pyramid.fit_size, Some(45));
+        assert_eq!(hd.fit_config().size, 45);
+        assert_eq!(hd.schedule.reconstruction_pixels, Some(51_200));
+        // small's recipe: everything but the sizes, the schedule, the fit's size and the
+        // reconstruction's pixels.
+        let mut resized = hd.clone();
+        resized.preset = small.preset.clone();
+        resized.pyramid = small.pyramid.clone();
+        resized.schedule.scales = small.schedule.scales.clone();
+        resized.schedule.scale_views = small.schedule.scale_views.clone();
+        resized.schedule.reconstruction_pixels = None;
+        assert_eq!(resized, small);
     }
 
     #[test]

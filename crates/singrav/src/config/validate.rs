@@ -76,6 +76,12 @@ impl TrainConfig {
                 "must be positive",
             ));
         }
+        if pyramid.fit_size.is_some_and(|size| size < 2) {
+            return Err(invalid(
+                "pyramid.fit_size",
+                "a fitted volume needs an edge of at least 2 voxels",
+            ));
+        }
         if pyramid.layers < 2 || pyramid.channels == 0 || pyramid.upsampler_widths.contains(&0) {
             return Err(invalid(
                 "pyramid.layers / pyramid.channels",
@@ -134,6 +140,12 @@ impl TrainConfig {
                     ),
                 ));
             }
+        }
+        if schedule.reconstruction_pixels == Some(0) {
+            return Err(invalid(
+                "schedule.reconstruction_pixels",
+                "must be positive (or null for whole views)",
+            ));
         }
         let rate = schedule.learning_rate;
         if !(rate.is_finite() && rate > 0.0) {

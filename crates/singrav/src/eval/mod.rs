@@ -43,6 +43,7 @@ mod scores;
 
 use arrangement::SceneMatter;
 
+pub use arrangement::ObjectCount;
 pub use family::Family;
 pub use scores::SceneScores;
 use scores::SeenScenes;
@@ -165,6 +166,13 @@ pub struct Evaluation {
     /// What the layout distances are measured against: `fit` (a direct fit of the training
     /// views) or `vstar`.
     pub layout_reference: String,
+    /// The colours of the kinds of the reference's matter, the order of every `by_kind` count.
+    pub object_kinds: Vec<[f64; 3]>,
+    /// The layout reference's own objects (a fit's neighbours may run together too).
+    pub reference_objects: ObjectCount,
+    /// For a dataset of a built-in scene, the objects of the scene itself (its layout baked at
+    /// the finest 3D scale's grid): the count the samples should reach.
+    pub true_objects: Option<ObjectCount>,
     /// The reference row of the built-in scene's other layouts, when asked for.
     pub family: Option<Family>,
 }
@@ -235,6 +243,17 @@ pub fn evaluate(
 
     let v_star = model.reconstruct()?;
     let reference = scene_matter(model, &v_star, scene_dataset, config.layout_reference)?;
+    let true_objects = scene_dataset
+        .scene_source()
+        .map(|source| {
+            let finest = model.config().pyramid.volume_sizes[scales - 1];
+            let truth = source
+                .kind
+                .build(source.seed)
+                .to_volume(radiance_volume::GridDims::cube(finest))?;
+            reference.objects(&truth)
+        })
+        .transpose()?;
     let reconstruction_arrangement = match config.layout_reference {
         LayoutReference::Fit => Some(reference.arrangement(&model.to_physical(&v_star)?)?),
         LayoutReference::Reconstruction => None,
@@ -317,6 +336,9 @@ pub fn evaluate(
             LayoutReference::Fit => "fit".into(),
             LayoutReference::Reconstruction => "vstar".into(),
         },
+        object_kinds: reference.kind_colours(),
+        reference_objects: reference.own_objects(),
+        true_objects,
         family,
     })
 }
@@ -331,7 +353,10 @@ fn scene_matter(
 ) -> Result<SceneMatter> {
     let volume = match reference {
         LayoutReference::Fit => {
-            crate::train::fit_training_target(model.config(), dataset, None, &mut |_| {})?.volume
+            // At the finest 3D scale, as the generated volumes are, whatever size the run's
+            // own fit for its 3D critic had.
+            let at_finest = model.config().clone().with(|c| c.pyramid.fit_size = None);
+            crate::train::fit_training_target(&at_finest, dataset, None, &mut |_| {})?.volume
         }
         LayoutReference::Reconstruction => model.to_physical(v_star)?,
     };

@@ -8,7 +8,7 @@ use scene_metrics::{
 };
 use serde::Serialize;
 
-use super::arrangement::Arrangement;
+use super::arrangement::{Arrangement, ObjectCount};
 use crate::error::Result;
 
 /// Scenes as the evaluation sees them, one entry per scene.
@@ -21,6 +21,8 @@ pub(super) struct SeenScenes {
     pub layouts: Vec<f64>,
     /// Shares of matter out of place against the scene's volume.
     pub misplaced: Vec<f64>,
+    /// Their objects.
+    pub objects: Vec<ObjectCount>,
 }
 
 impl SeenScenes {
@@ -30,6 +32,7 @@ impl SeenScenes {
             opacity: Vec::with_capacity(scenes),
             layouts: Vec::with_capacity(scenes),
             misplaced: Vec::with_capacity(scenes),
+            objects: Vec::with_capacity(scenes),
         }
     }
 
@@ -37,6 +40,7 @@ impl SeenScenes {
     pub fn push_arrangement(&mut self, arrangement: Arrangement) {
         self.layouts.push(arrangement.distance);
         self.misplaced.push(arrangement.misplaced);
+        self.objects.push(arrangement.objects);
     }
 }
 
@@ -77,6 +81,20 @@ pub struct SceneScores {
     pub misplaced_matter: f64,
     /// Its standard error over scenes.
     pub misplaced_matter_stderr: Option<f64>,
+    /// The volumes' mean number of objects ([`Objects`](scene_metrics::Objects): separate
+    /// pieces of solid matter above the ground, no smaller than a fifth of the scene's median
+    /// object): fewer than the scene's where neighbours run together.
+    pub objects: f64,
+    /// Its standard error over scenes.
+    pub objects_stderr: Option<f64>,
+    /// The mean number per kind of the scene's matter (the evaluation's `object_kinds`).
+    pub objects_by_kind: Vec<f64>,
+    /// The volumes' mean share of their object matter in their largest object.
+    pub largest_object_share: f64,
+    /// Its standard error over scenes.
+    pub largest_object_share_stderr: Option<f64>,
+    /// The largest of the volumes' largest-object shares.
+    pub largest_object_share_max: f64,
 }
 
 impl SceneScores {
@@ -95,6 +113,17 @@ impl SceneScores {
         let colour = mean_and_error(&colour_swd_per_scene(&seen.views, real)?)?;
         let layout = mean_and_error(&seen.layouts)?;
         let misplaced = mean_and_error(&seen.misplaced)?;
+        let counts: Vec<f64> = seen.objects.iter().map(|o| o.count as f64).collect();
+        let objects = mean_and_error(&counts)?;
+        let shares: Vec<f64> = seen.objects.iter().map(|o| o.largest_share).collect();
+        let largest = mean_and_error(&shares)?;
+        let kinds = seen.objects.first().map_or(0, |o| o.by_kind.len());
+        let objects_by_kind = (0..kinds)
+            .map(|k| {
+                let total: usize = seen.objects.iter().map(|o| o.by_kind[k]).sum();
+                total as f64 / seen.objects.len() as f64
+            })
+            .collect();
         let floaters = floaters_per_scene(&seen.opacity, real_alpha)?
             .map(|per_scene| mean_and_error(&per_scene))
             .transpose()?;
@@ -125,6 +154,12 @@ impl SceneScores {
             layout_distance_stderr: layout.1,
             misplaced_matter: misplaced.0,
             misplaced_matter_stderr: misplaced.1,
+            objects: objects.0,
+            objects_stderr: objects.1,
+            objects_by_kind,
+            largest_object_share: largest.0,
+            largest_object_share_stderr: largest.1,
+            largest_object_share_max: shares.iter().copied().fold(0.0, f64::max),
         })
     }
 }

@@ -7,14 +7,14 @@ use std::collections::HashMap;
 use candle_core::Tensor;
 use patch_gan::upsample_bilinear2x;
 use rand::Rng;
-use swd_loss::{TextureLoss, Vgg19};
+use swd_loss::Vgg19;
 
 use rgbd_dataset::DatasetLevel;
 
 use super::critic::Critic;
 use super::losses::{LossTerm, StepLosses, StepMeans, StepTerms};
 use super::stage::{Stage, StageParts};
-use super::texture::{texture_loss, SwdExtractor};
+use super::texture::{texture_loss, ViewTexture};
 use super::volume_scale::{mse, pick_views, select};
 use crate::config::TrainConfig;
 use crate::error::Result;
@@ -37,7 +37,7 @@ pub(super) struct FinalScale<'a> {
     renderer: ViewRenderer,
     critic: Critic,
     opt: Adam,
-    texture: Option<TextureLoss<SwdExtractor>>,
+    texture: Option<ViewTexture>,
 }
 
 impl<'a> FinalScale<'a> {
@@ -67,7 +67,7 @@ impl<'a> FinalScale<'a> {
         let frozen = model.generate(&model.reconstruction_noise(last)?)?.detach();
         let cameras: Vec<_> = coarse.cameras.iter().collect();
         let (reconstruction, _) = renderer.render(&frozen, &cameras)?;
-        let texture = texture_loss(config, vgg)?;
+        let texture = texture_loss(config, vgg, &fine.images)?;
         Ok(Self {
             model,
             config,
@@ -152,8 +152,7 @@ impl Stage for FinalScale<'_> {
                 let adv = self.critic.generator_loss(&joint(&upsampled, &coarse)?)?;
                 terms.add(LossTerm::Adversarial, adv);
                 if let Some(texture) = &self.texture {
-                    let target = texture.target(&select(&self.fine.images, &fake_views)?)?;
-                    let swd = texture.loss(&upsampled, &target, rng)?;
+                    let swd = texture.loss(&upsampled, &fake_views, rng)?;
                     terms.add(LossTerm::Swd, (swd * self.config.losses.swd)?);
                 }
             }

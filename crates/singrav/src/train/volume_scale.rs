@@ -62,6 +62,68 @@ pub(super) struct VolumeScale<'a> {
     /// The 3D critic of volumes (runs with `lambda_volume_critic > 0`), judging against
     /// `fitted`.
     volume_critic: Option<VolumeCritic>,
+    /// Every training pixel's targets, when the reconstruction renders random pixels rather
+    /// than whole views (fewer pixels per step than its views hold).
+    pixel_targets: Option<PixelTargets>,
+}
+
+/// What a reconstruction's renderings are compared with: colour, alpha and, where depth is
+/// supervised, normalised depth and its weights; each `(V, C, h, w)` for whole views or
+/// `(P, C)` for pixels.
+struct Targets {
+    rgb: Tensor,
+    alpha: Tensor,
+    depth: Option<Tensor>,
+    depth_mask: Option<Tensor>,
+}
+
+/// The targets of every pixel of every view, `(V h w, C)` (view, then row-major pixel), and how
+/// many of them a step renders.
+struct PixelTargets {
+    all: Targets,
+    per_step: usize,
+}
+
+impl PixelTargets {
+    /// `per_step` pixels of `level`'s views with critic inputs `real` (colour, normalised depth
+    /// when `with_depth`, ...).
+    fn new(level: &DatasetLevel, real: &Tensor, with_depth: bool, per_step: usize) -> Result<Self> {
+        let flat = |t: &Tensor| -> Result<Tensor> {
+            let (v, c, h, w) = t.dims4()?;
+            Ok(t.permute((0, 2, 3, 1))?
+                .contiguous()?
+                .reshape((v * h * w, c))?)
+        };
+        Ok(Self {
+            all: Targets {
+                rgb: flat(&level.images)?,
+                alpha: flat(&level.opacity)?,
+                depth: with_depth
+                    .then(|| flat(&real.narrow(1, 3, 1)?))
+                    .transpose()?,
+                depth_mask: level.depth_mask.as_ref().map(flat).transpose()?,
+            },
+            per_step,
+        })
+    }
+
+    /// Every training pixel.
+    fn len(&self) -> Result<usize> {
+        Ok(self.all.rgb.dim(0)?)
+    }
+
+    /// The targets of the pixels `chosen`.
+    fn select(&self, chosen: &[usize]) -> Result<Targets> {
+        let index: Vec<u32> = chosen.iter().map(|&i| i as u32).collect();
+        let index = Tensor::from_vec(index, chosen.len(), self.all.rgb.device())?;
+        let pick = |t: &Tensor| -> Result<Tensor> { Ok(t.index_select(&index, 0)?) };
+        Ok(Targets {
+            rgb: pick(&self.all.rgb)?,
+            alpha: pick(&self.all.alpha)?,
+            depth: self.all.depth.as_ref().map(pick).transpose()?,
+            depth_mask: self.all.depth_mask.as_ref().map(pick).transpose()?,
+        })
+    }
 }
 
 /// `count` distinct views out of `views` (all of them when there are fewer), drawn from `rng`.
@@ -138,6 +200,14 @@ impl<'a> VolumeScale<'a> {
         } else {
             Some(model.generate(&frozen_noise)?.detach())
         };
+        let view_pixels = level.images.dim(2)? * level.images.dim(3)?;
+        let whole_views = config.views(n).reconstruction * view_pixels;
+        let pixel_targets = config
+            .schedule
+            .reconstruction_pixels
+            .filter(|&per_step| per_step < whole_views)
+            .map(|per_step| PixelTargets::new(&level, &real, config.ablations.use_depth, per_step))
+            .transpose()?;
         Ok(Self {
             model,
             config,
@@ -152,6 +222,7 @@ impl<'a> VolumeScale<'a> {
             reconstruction_noise,
             fitted: None,
             volume_critic: None,
+            pixel_targets,
         })
     }
 
@@ -341,37 +412,79 @@ impl<'a> VolumeScale<'a> {
     }
 
     /// A generator step's terms on the reconstruction V*_n: against the fitted volume (runs
-    /// with one), then its renderings' opacity, colour and depth against the real views'.
+    /// with one), then its renderings' opacity, colour and depth against the real views' (whole
+    /// views, or random pixels over all of them where [`Schedule::reconstruction_pixels`]
+    /// says so).
+    ///
+    /// [`Schedule::reconstruction_pixels`]: crate::config::Schedule::reconstruction_pixels
     fn reconstruction_terms(
         &self,
         rng: &mut rand_chacha::ChaCha8Rng,
         terms: &mut StepTerms,
     ) -> Result<()> {
         let losses = &self.config.losses;
-        let rec_views = pick_views(rng, self.views(), self.config.views(self.n).reconstruction);
+        let rec_views = match self.pixel_targets {
+            Some(_) => Vec::new(),
+            None => pick_views(rng, self.views(), self.config.views(self.n).reconstruction),
+        };
         let reconstruction = self.reconstruction()?;
         if let (Some(fitted), true) = (&self.fitted, losses.fitted > 0.0) {
             let loss = fitted.loss(&reconstruction, &self.config.activation())?;
             terms.add(LossTerm::Fitted, (loss * losses.fitted)?);
         }
-        let maps = self
-            .renderer
-            .render_all(&reconstruction, &self.cameras(&rec_views))?;
+        let (maps, real) = match &self.pixel_targets {
+            Some(all) => {
+                let chosen = rand::seq::index::sample(rng, all.len()?, all.per_step).into_vec();
+                let pixels = self.level.cameras[0].width * self.level.cameras[0].height;
+                let rays: Vec<_> = chosen
+                    .iter()
+                    .map(|&i| (&self.level.cameras[i / pixels], i % pixels))
+                    .collect();
+                let maps = self.renderer.render_pixels(&reconstruction, &rays)?;
+                (maps, all.select(&chosen)?)
+            }
+            None => {
+                let maps = self
+                    .renderer
+                    .render_all(&reconstruction, &self.cameras(&rec_views))?;
+                (maps, self.view_targets(&rec_views)?)
+            }
+        };
         if let (Some(opacity), true) = (&maps.opacity, losses.opacity > 0.0) {
-            let alpha = select(&self.level.opacity, &rec_views)?;
-            terms.add(LossTerm::Opacity, (mse(opacity, &alpha)? * losses.opacity)?);
+            terms.add(
+                LossTerm::Opacity,
+                (mse(opacity, &real.alpha)? * losses.opacity)?,
+            );
         }
-        let real = select(&self.level.images, &rec_views)?;
-        terms.add(LossTerm::Colour, (mse(&maps.rgb, &real)? * losses.rgb)?);
-        if let Some(depth) = maps.depth {
-            let real_depth = select(&self.real, &rec_views)?.narrow(1, 3, 1)?;
-            let error = match &self.level.depth_mask {
-                None => mse(&depth, &real_depth)?,
-                Some(mask) => masked_mse(&depth, &real_depth, &select(mask, &rec_views)?)?,
+        terms.add(LossTerm::Colour, (mse(&maps.rgb, &real.rgb)? * losses.rgb)?);
+        if let (Some(depth), Some(real_depth)) = (maps.depth, &real.depth) {
+            let error = match &real.depth_mask {
+                None => mse(&depth, real_depth)?,
+                Some(mask) => masked_mse(&depth, real_depth, mask)?,
             };
             terms.add(LossTerm::Depth, (error * losses.depth)?);
         }
         Ok(())
+    }
+
+    /// The reconstruction's targets from whole views.
+    fn view_targets(&self, views: &[usize]) -> Result<Targets> {
+        Ok(Targets {
+            rgb: select(&self.level.images, views)?,
+            alpha: select(&self.level.opacity, views)?,
+            depth: self
+                .config
+                .ablations
+                .use_depth
+                .then(|| -> Result<Tensor> { Ok(select(&self.real, views)?.narrow(1, 3, 1)?) })
+                .transpose()?,
+            depth_mask: self
+                .level
+                .depth_mask
+                .as_ref()
+                .map(|mask| select(mask, views))
+                .transpose()?,
+        })
     }
 
     fn views(&self) -> usize {

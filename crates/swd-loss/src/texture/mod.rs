@@ -36,15 +36,16 @@ impl FeatureMap {
         Ok(c * self.patch * self.patch)
     }
 
-    /// Projects every point onto the directions: `(B, K, P)` with P the number of points
-    /// (`(H - patch + 1) (W - patch + 1)`).
-    ///
-    /// Patches are gathered into a `(B, C p^2, P)` matrix (one `index_select`) and multiplied by
-    /// the `(K, C p^2)` directions. This is what `conv2d` does inside, but its backward in
-    /// candle 0.11 goes through `conv_transpose2d` and a full-image-sized kernel, much slower
-    /// (measured in docs/performance-swd.md); an index_select's backward is an index_add.
-    fn project(&self, projections: &Projections) -> Result<Tensor> {
-        let (b, c, h, w) = self.values.dims4()?;
+    /// Returns the number of points, `(H - patch + 1) (W - patch + 1)`: every position where a
+    /// whole patch fits.
+    pub fn point_count(&self) -> Result<usize> {
+        let (oh, ow) = self.patch_grid()?;
+        Ok(oh * ow)
+    }
+
+    /// The positions of the patches' top-left corners: `(H - p + 1, W - p + 1)`.
+    fn patch_grid(&self) -> Result<(usize, usize)> {
+        let (_, _, h, w) = self.values.dims4()?;
         let p = self.patch;
         if p == 0 || h < p || w < p {
             return Err(invalid(
@@ -52,6 +53,21 @@ impl FeatureMap {
                 format!("a {h}x{w} map has no {p}x{p} patches"),
             ));
         }
+        Ok((h - p + 1, w - p + 1))
+    }
+
+    /// Projects points onto the directions: `(B, K, P)`, with every point (`positions` `None`)
+    /// or the points at `positions` (flat indices `y * (W - p + 1) + x` of patch corners, the
+    /// same for every image of the batch).
+    ///
+    /// Patches are gathered into a `(B, C p^2, P)` matrix (one `index_select`) and multiplied by
+    /// the `(K, C p^2)` directions. This is what `conv2d` does inside, but its backward in
+    /// candle 0.11 goes through `conv_transpose2d` and a full-image-sized kernel, much slower
+    /// (measured in docs/performance-swd.md); an index_select's backward is an index_add.
+    fn project(&self, projections: &Projections, positions: Option<&[u32]>) -> Result<Tensor> {
+        let (b, c, h, w) = self.values.dims4()?;
+        let p = self.patch;
+        let (oh, ow) = self.patch_grid()?;
         if projections.dim() != c * p * p {
             return Err(invalid(
                 "projections",
@@ -64,33 +80,83 @@ impl FeatureMap {
         }
         let rows = projections.rows_as(self.values.dtype(), self.values.device())?;
         let pixels = self.values.reshape((b, c, h * w))?;
-        let points = if p == 1 {
-            pixels
-        } else {
-            let (oh, ow) = (h - p + 1, w - p + 1);
-            let index = patch_index(w, p, oh, ow, self.values.device())?;
-            pixels
-                .index_select(&index, 2)?
-                .reshape((b, c * p * p, oh * ow))?
+        let points = match (p, positions) {
+            (1, None) => pixels,
+            _ => {
+                let count = positions.map_or(oh * ow, <[u32]>::len);
+                let index = patch_index(w, p, ow, positions, count, self.values.device())?;
+                pixels
+                    .index_select(&index, 2)?
+                    .reshape((b, c * p * p, count))?
+            }
         };
         Ok(rows.broadcast_matmul(&points)?)
     }
 }
 
-/// Flat pixel indices of all `p x p` patches of a `w`-wide image, ordered `(dy, dx, point)` so
+/// Flat pixel indices of `p x p` patches of a `w`-wide image whose corners lie on a grid `ow`
+/// wide (all `count` of them in order, or those at `positions`), ordered `(dy, dx, point)` so
 /// that selecting them from `(B, C, H W)` and reshaping gives rows in `(c, dy, dx)` order and
 /// one column per patch.
-fn patch_index(w: usize, p: usize, oh: usize, ow: usize, device: &Device) -> Result<Tensor> {
-    let mut index = Vec::with_capacity(p * p * oh * ow);
+fn patch_index(
+    w: usize,
+    p: usize,
+    ow: usize,
+    positions: Option<&[u32]>,
+    count: usize,
+    device: &Device,
+) -> Result<Tensor> {
+    let corner = |i: u32| (i / ow as u32) * w as u32 + i % ow as u32;
+    let corners: Vec<u32> = match positions {
+        Some(positions) => positions.iter().map(|&i| corner(i)).collect(),
+        None => (0..count as u32).map(corner).collect(),
+    };
+    let mut index = Vec::with_capacity(p * p * count);
     for dy in 0..p {
         for dx in 0..p {
-            for y in 0..oh {
-                let start = ((y + dy) * w + dx) as u32;
-                index.extend(start..start + ow as u32);
-            }
+            let offset = (dy * w + dx) as u32;
+            index.extend(corners.iter().map(|&c| c + offset));
         }
     }
-    Ok(Tensor::from_vec(index, p * p * oh * ow, device)?)
+    Ok(Tensor::from_vec(index, p * p * count, device)?)
+}
+
+/// How many points of each layer one evaluation of [`TextureLoss::loss`] compares.
+///
+/// At 320^2 the finest level of the patch pyramid holds 98,596 patches of 147 dimensions, and
+/// projecting, sorting and back-propagating all of them is most of a last-scale training step.
+/// A random subset of a few thousand gives nearly the same gradient: the directions, also
+/// random, are the larger part of its noise (docs/swd-loss.md has the measured error against
+/// run time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Points {
+    /// Every point of every layer (exact along the drawn directions).
+    #[default]
+    All,
+    /// At most this many points per layer and image batch: positions drawn uniformly without
+    /// replacement at every call, separately for the generated and the target images (each
+    /// draw shared by the images of its batch). Layers with fewer points use them all. Each
+    /// slice then compares two empirical distributions of the subsets (exact 1D distance
+    /// between them, [`crate::sliced_wasserstein`]'s).
+    Random(usize),
+}
+
+impl Points {
+    /// Draws the positions of one layer with `total` points: `None` for all of them, else a
+    /// sorted random subset (sorted so that the gather reads memory in order).
+    fn draw<R: Rng + ?Sized>(self, total: usize, rng: &mut R) -> Option<Vec<u32>> {
+        match self {
+            Self::Random(n) if n < total => {
+                let mut picked: Vec<u32> = rand::seq::index::sample(rng, total, n)
+                    .into_iter()
+                    .map(|i| i as u32)
+                    .collect();
+                picked.sort_unstable();
+                Some(picked)
+            }
+            _ => None,
+        }
+    }
 }
 
 /// Turns a batch of images into feature maps, one per layer.
@@ -118,6 +184,8 @@ pub struct TextureLossConfig {
     pub slices: Slices,
     /// The 1D distance per slice (default: squared W2, as Heitz et al.).
     pub metric: Metric,
+    /// The points of each layer [`TextureLoss::loss`] compares (default: all).
+    pub points: Points,
 }
 
 impl Default for TextureLossConfig {
@@ -125,6 +193,7 @@ impl Default for TextureLossConfig {
         Self {
             slices: Slices::Fixed(64),
             metric: Metric::SquaredW2,
+            points: Points::All,
         }
     }
 }
@@ -141,6 +210,12 @@ impl TextureLossConfig {
     pub fn with_metric(self, metric: Metric) -> Self {
         Self { metric, ..self }
     }
+
+    /// Sets the points compared per layer.
+    #[must_use]
+    pub fn with_points(self, points: Points) -> Self {
+        Self { points, ..self }
+    }
 }
 
 /// The feature maps of target images, computed once and reused by every loss evaluation.
@@ -154,6 +229,47 @@ impl TextureTarget {
     #[must_use]
     pub fn maps(&self) -> &[FeatureMap] {
         &self.maps
+    }
+
+    /// Returns the target of images `indices` of this target's batch, in that order: extract
+    /// the features of a fixed set of images once, then pick the ones each step compares.
+    ///
+    /// ```
+    /// use candle_core::{Device, Tensor};
+    /// use swd_loss::{PatchPyramid, PatchPyramidConfig, TextureLoss, TextureLossConfig};
+    ///
+    /// let loss = TextureLoss::new(PatchPyramid::new(PatchPyramidConfig::default())?, TextureLossConfig::default())?;
+    /// let views = Tensor::rand(0f32, 1.0, (5, 3, 32, 32), &Device::Cpu)?;
+    /// let all = loss.target(&views)?;
+    /// let two = all.select(&[4, 1])?;
+    /// assert_eq!(two.maps()[0].values.dims(), &[2, 3, 32, 32]);
+    /// # Ok::<(), swd_loss::Error>(())
+    /// ```
+    pub fn select(&self, indices: &[usize]) -> Result<Self> {
+        let batch = self.maps.first().map_or(Ok(0), |m| m.values.dim(0))?;
+        if indices.is_empty() || indices.iter().any(|&i| i >= batch) {
+            return Err(invalid(
+                "indices",
+                format!("expected 1 or more image indices below {batch}, got {indices:?}"),
+            ));
+        }
+        let device = self.maps[0].values.device();
+        let index = Tensor::from_vec(
+            indices.iter().map(|&i| i as u32).collect::<Vec<_>>(),
+            indices.len(),
+            device,
+        )?;
+        let maps = self
+            .maps
+            .iter()
+            .map(|m| {
+                Ok(FeatureMap {
+                    values: m.values.index_select(&index, 0)?,
+                    patch: m.patch,
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self { maps })
     }
 }
 
@@ -189,13 +305,16 @@ pub struct TextureLoss<E> {
 impl<E: FeatureExtractor> TextureLoss<E> {
     /// Builds the loss with weight 1 for every layer.
     ///
-    /// Errors on `Slices::Fixed(0)` or an extractor without layers.
+    /// Errors on `Slices::Fixed(0)`, `Points::Random(0)` or an extractor without layers.
     pub fn new(extractor: E, config: TextureLossConfig) -> Result<Self> {
         if config.slices == Slices::Fixed(0) {
             return Err(invalid(
                 "slices",
                 "at least one projection per layer is needed",
             ));
+        }
+        if config.points == Points::Random(0) {
+            return Err(invalid("points", "at least one point per layer is needed"));
         }
         let layers = extractor.layer_count();
         if layers == 0 {
@@ -280,7 +399,9 @@ impl<E: FeatureExtractor> TextureLoss<E> {
     }
 
     /// Computes the loss of `generated` `(B, 3, H, W)` against `target` along directions drawn
-    /// afresh from `rng` (the resampling Heitz et al. recommend); a scalar tensor.
+    /// afresh from `rng` (the resampling Heitz et al. recommend), over the points
+    /// [`TextureLossConfig::points`] says (their positions drawn from `rng` too, after the
+    /// directions); a scalar tensor.
     pub fn loss<R: Rng + ?Sized>(
         &self,
         generated: &Tensor,
@@ -288,15 +409,32 @@ impl<E: FeatureExtractor> TextureLoss<E> {
         rng: &mut R,
     ) -> Result<Tensor> {
         let projections = self.draw_projections(target, rng)?;
-        self.loss_with_projections(generated, target, &projections)
+        let points = self.config.points;
+        self.evaluate(generated, target, &projections, &mut |total| {
+            points.draw(total, rng)
+        })
     }
 
-    /// Computes the loss along fixed directions, one [`Projections`] per layer; a scalar tensor.
+    /// Computes the loss along fixed directions, one [`Projections`] per layer, over every point
+    /// whatever [`TextureLossConfig::points`] says (a deterministic evaluation, as metrics
+    /// want); a scalar tensor.
     pub fn loss_with_projections(
         &self,
         generated: &Tensor,
         target: &TextureTarget,
         projections: &[Projections],
+    ) -> Result<Tensor> {
+        self.evaluate(generated, target, projections, &mut |_| None)
+    }
+
+    /// The loss along `projections`; `positions(points)` picks the points of a layer of the
+    /// generated or the target batch with that many (`None`: all).
+    fn evaluate(
+        &self,
+        generated: &Tensor,
+        target: &TextureTarget,
+        projections: &[Projections],
+        positions: &mut dyn FnMut(usize) -> Option<Vec<u32>>,
     ) -> Result<Tensor> {
         let maps = self.extract_checked(generated)?;
         if projections.len() != maps.len() || target.maps.len() != maps.len() {
@@ -313,9 +451,11 @@ impl<E: FeatureExtractor> TextureLoss<E> {
         let mut total: Option<Tensor> = None;
         for (l, ((gen, tgt), proj)) in maps.iter().zip(&target.maps).zip(projections).enumerate() {
             check_layer_pair(l, gen, tgt)?;
+            let gen_points = positions(gen.point_count()?);
+            let tgt_points = positions(tgt.point_count()?);
             let per_slice = sliced_projected(
-                &gen.project(proj)?,
-                &tgt.project(proj)?,
+                &gen.project(proj, gen_points.as_deref())?,
+                &tgt.project(proj, tgt_points.as_deref())?,
                 self.config.metric,
                 "generated features",
                 "target features",

@@ -90,18 +90,45 @@ impl Mesh {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn write(&self, path: &Path) -> Result<()> {
+        // Checked here too, so that the error names the file.
         if self.triangles.is_empty() {
             return Err(Error::NoSurface {
                 why: format!("{}: the mesh has no triangles to write", path.display()),
             });
         }
-        let bytes = match MeshFormat::from_path(path)? {
+        let bytes = self.to_bytes(MeshFormat::from_path(path)?)?;
+        radiance_volume::io::write_bytes_atomic(path, &bytes)?;
+        Ok(())
+    }
+
+    /// The bytes [`Mesh::write`] writes in `format` (for a server that sends the file instead
+    /// of storing it).
+    ///
+    /// ```
+    /// use volume_mesh::{Mesh, MeshFormat};
+    /// let triangle = Mesh {
+    ///     positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+    ///     normals: vec![[0.0, 0.0, 1.0]; 3],
+    ///     colours: vec![[1.0, 0.0, 0.0]; 3],
+    ///     triangles: vec![[0, 1, 2]],
+    /// };
+    /// let dir = tempfile::tempdir()?;
+    /// let path = dir.path().join("t.glb");
+    /// triangle.write(&path)?;
+    /// assert_eq!(triangle.to_bytes(MeshFormat::Glb)?, std::fs::read(&path)?);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn to_bytes(&self, format: MeshFormat) -> Result<Vec<u8>> {
+        if self.triangles.is_empty() {
+            return Err(Error::NoSurface {
+                why: "the mesh has no triangles to write".into(),
+            });
+        }
+        Ok(match format {
             MeshFormat::Glb => gltf::glb(self)?,
             MeshFormat::Gltf => gltf::gltf(self)?,
             MeshFormat::Ply => ply::ply(self),
             MeshFormat::Obj => obj::obj(self),
-        };
-        radiance_volume::io::write_bytes_atomic(path, &bytes)?;
-        Ok(())
+        })
     }
 }

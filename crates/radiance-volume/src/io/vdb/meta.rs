@@ -66,51 +66,98 @@ pub(crate) fn put_metadata(buf: &mut Vec<u8>, entries: &[(&str, MetaValue<'_>)])
     }
 }
 
-/// Appends the archive header: magic, versions, `has_grid_offsets = 1` (so readers can seek to
-/// each grid, and vdb-rs requires it), the 36-character UUID, empty file metadata and the grid
-/// count.
-pub(crate) fn put_header(buf: &mut Vec<u8>, uuid: &str, grid_count: u32) {
-    debug_assert_eq!(uuid.len(), 36);
+/// Appends the archive header up to its UUID: magic, versions and `has_grid_offsets = 1` (so
+/// readers can seek to each grid, and vdb-rs requires it). [`put_header_end`] follows the UUID.
+pub(crate) fn put_header_start(buf: &mut Vec<u8>) {
     buf.put_i64(MAGIC);
     buf.put_u32(FILE_VERSION);
     buf.put_u32(LIBRARY_VERSION.0);
     buf.put_u32(LIBRARY_VERSION.1);
     buf.put_u8(1);
-    buf.extend_from_slice(uuid.as_bytes());
+}
+
+/// Appends the rest of the archive header after the 36-character UUID: empty file metadata and
+/// the grid count.
+pub(crate) fn put_header_end(buf: &mut Vec<u8>, grid_count: u32) {
     put_metadata(buf, &[]);
     buf.put_u32(grid_count);
 }
 
-/// Returns a UUID-shaped 36-character id derived from `parts` (a 128-bit FNV-1a over 8-byte
-/// words, formatted as an RFC 9562 version-8 "custom" UUID). OpenVDB only uses the UUID to tell
+/// A UUID-shaped 36-character id derived from the bytes of some parts (a 128-bit FNV-1a over
+/// each part's 8-byte words, then its remaining bytes and its length, formatted as an RFC 9562
+/// version-8 "custom" UUID), fed as the parts are written. OpenVDB only uses the UUID to tell
 /// files apart; deriving it from the content keeps exports byte-for-byte reproducible.
-pub(crate) fn content_uuid<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> String {
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-    let (mut a, mut b) = (0xcbf2_9ce4_8422_2325u64, 0x6c62_272e_07bb_0142u64);
-    for part in parts {
-        let mut words = part.chunks_exact(8);
-        for w in &mut words {
-            let w = u64::from_le_bytes(w.try_into().expect("chunks of 8"));
-            a = (a ^ w).wrapping_mul(PRIME);
-            b = (b ^ w.rotate_left(29)).wrapping_mul(PRIME);
+pub(crate) struct ContentHash {
+    a: u64,
+    b: u64,
+    /// The bytes of an incomplete word of the current part.
+    word: Vec<u8>,
+    part_len: u64,
+}
+
+const PRIME: u64 = 0x0000_0100_0000_01b3;
+
+impl ContentHash {
+    pub(crate) fn new() -> Self {
+        Self {
+            a: 0xcbf2_9ce4_8422_2325,
+            b: 0x6c62_272e_07bb_0142,
+            word: Vec::with_capacity(8),
+            part_len: 0,
         }
-        for &byte in words.remainder() {
-            a = (a ^ u64::from(byte)).wrapping_mul(PRIME);
-            b = (b ^ u64::from(byte)).wrapping_mul(PRIME);
-        }
-        a ^= part.len() as u64;
     }
-    // Version 8 in the high nibble of the third group, variant 0b10 in the fourth.
-    let a = (a & !0xf000) | 0x8000;
-    let b = (b & !(0b11 << 62)) | (0b10 << 62);
-    format!(
-        "{:08x}-{:04x}-{:04x}-{:04x}-{:012x}",
-        a >> 32,
-        (a >> 16) & 0xffff,
-        a & 0xffff,
-        b >> 48,
-        b & 0xffff_ffff_ffff
-    )
+
+    /// Feeds bytes of the current part.
+    pub(crate) fn update(&mut self, mut bytes: &[u8]) {
+        self.part_len += bytes.len() as u64;
+        if !self.word.is_empty() {
+            let take = (8 - self.word.len()).min(bytes.len());
+            self.word.extend_from_slice(&bytes[..take]);
+            bytes = &bytes[take..];
+            if self.word.len() < 8 {
+                return;
+            }
+            let w = u64::from_le_bytes(self.word[..].try_into().expect("8 bytes"));
+            self.mix_word(w);
+            self.word.clear();
+        }
+        let mut words = bytes.chunks_exact(8);
+        for w in &mut words {
+            self.mix_word(u64::from_le_bytes(w.try_into().expect("chunks of 8")));
+        }
+        self.word.extend_from_slice(words.remainder());
+    }
+
+    /// Ends the current part: its last bytes one by one, then its length.
+    pub(crate) fn end_part(&mut self) {
+        for &byte in &self.word {
+            self.a = (self.a ^ u64::from(byte)).wrapping_mul(PRIME);
+            self.b = (self.b ^ u64::from(byte)).wrapping_mul(PRIME);
+        }
+        self.word.clear();
+        self.a ^= self.part_len;
+        self.part_len = 0;
+    }
+
+    fn mix_word(&mut self, w: u64) {
+        self.a = (self.a ^ w).wrapping_mul(PRIME);
+        self.b = (self.b ^ w.rotate_left(29)).wrapping_mul(PRIME);
+    }
+
+    /// The UUID of the parts ended so far.
+    pub(crate) fn uuid(&self) -> String {
+        // Version 8 in the high nibble of the third group, variant 0b10 in the fourth.
+        let a = (self.a & !0xf000) | 0x8000;
+        let b = (self.b & !(0b11 << 62)) | (0b10 << 62);
+        format!(
+            "{:08x}-{:04x}-{:04x}-{:04x}-{:012x}",
+            a >> 32,
+            (a >> 16) & 0xffff,
+            a & 0xffff,
+            b >> 48,
+            b & 0xffff_ffff_ffff
+        )
+    }
 }
 
 /// The linear index -> world map of an exported grid: `world = index * voxel_size + translation`,
@@ -194,8 +241,22 @@ mod tests {
 
     #[test]
     fn uuid_is_well_formed_and_depends_on_content() {
-        let u1 = content_uuid([&b"abc"[..], &[0u8; 17][..]]);
-        let u2 = content_uuid([&b"abd"[..], &[0u8; 17][..]]);
+        let uuid = |parts: &[&[u8]], split: usize| {
+            let mut hash = ContentHash::new();
+            for part in parts {
+                let (head, tail) = part.split_at(split.min(part.len()));
+                hash.update(head);
+                hash.update(tail);
+                hash.end_part();
+            }
+            hash.uuid()
+        };
+        let u1 = uuid(&[&b"abc"[..], &[0u8; 17][..]], 0);
+        let u2 = uuid(&[&b"abd"[..], &[0u8; 17][..]], 0);
+        // However a part is fed, its hash is the same.
+        for split in 1..17 {
+            assert_eq!(uuid(&[&b"abc"[..], &[0u8; 17][..]], split), u1);
+        }
         assert_eq!(u1.len(), 36);
         assert_ne!(u1, u2);
         assert_eq!(u1.as_bytes()[14], b'8');

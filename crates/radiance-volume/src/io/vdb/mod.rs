@@ -34,17 +34,17 @@ mod meta;
 mod read;
 mod tree;
 
-use std::io::Write;
+use std::io::{Cursor, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use candle_core::Tensor;
 use glam::DMat4;
 
 use self::bytes::PutBytes;
-use self::meta::{MetaValue, Transform, COMPRESS_ACTIVE_MASK, COMPRESS_ZIP};
+use self::meta::{ContentHash, MetaValue, Transform, COMPRESS_ACTIVE_MASK, COMPRESS_ZIP};
 use self::tree::{Encoding, GridValues, Topology};
-use super::atomic::{check_writable, write_bytes_atomic};
+use super::atomic::{check_writable, write_atomic};
 use crate::error::{invalid, io_error, Error, Result};
+use crate::source::VolumeSource;
 use crate::volume::RadianceVolume;
 
 pub use self::read::{COLOR_GRID_NAMES, COLOR_RGB_GRID_NAMES, DEFAULT_IMPORT_COLOR};
@@ -65,13 +65,15 @@ pub struct VdbStats {
     pub bytes: u64,
 }
 
-/// Writes a [`RadianceVolume`] as an OpenVDB file; made by [`RadianceVolume::write_vdb`].
+/// Writes a volume as an OpenVDB file; made by [`RadianceVolume::write_vdb`], or by
+/// [`VdbWriter::new`] for any [`VolumeSource`] (such as a [`crate::Resampled`] volume, computed
+/// block by block as it is written).
 ///
 /// Defaults: full floats, no zlib, threshold 0, no feature grids, non-finite values refused.
 #[derive(Debug, Clone)]
 #[must_use = "a writer does nothing until `to_file` or `to_writer` is called"]
 pub struct VdbWriter<'a> {
-    volume: &'a RadianceVolume,
+    volume: &'a dyn VolumeSource,
     half: bool,
     zlib: bool,
     threshold: f32,
@@ -84,8 +86,15 @@ impl RadianceVolume {
     /// Starts an OpenVDB export of this volume (see [`VdbWriter`] and the module docs of
     /// [`crate::io::vdb`]).
     pub fn write_vdb(&self) -> VdbWriter<'_> {
-        VdbWriter {
-            volume: self,
+        VdbWriter::new(self)
+    }
+}
+
+impl<'a> VdbWriter<'a> {
+    /// Starts an OpenVDB export of `volume`, with the defaults above.
+    pub fn new(volume: &'a dyn VolumeSource) -> Self {
+        Self {
+            volume,
             half: false,
             zlib: false,
             threshold: 0.0,
@@ -94,9 +103,7 @@ impl RadianceVolume {
             placed: None,
         }
     }
-}
 
-impl<'a> VdbWriter<'a> {
     /// Stores values as IEEE half floats (`_HalfFloat` grids): half the size, about 3 decimal
     /// digits. Values beyond ±65504 make the export fail.
     pub fn half(self, half: bool) -> Self {
@@ -156,27 +163,35 @@ impl<'a> VdbWriter<'a> {
         }
     }
 
-    /// Writes the file atomically. The destination is checked first, so an unwritable path fails
-    /// before any work, and no partial file is ever left under `path`.
+    /// Writes the file atomically, streaming it: the volume is read one slab (for the tree's
+    /// shape) and then one 128^3 brick per grid at a time, and nothing larger is held. The
+    /// destination is checked first, so an unwritable path fails before any work, and no
+    /// partial file is ever left under `path`.
     pub fn to_file(&self, path: impl AsRef<Path>) -> Result<VdbStats> {
         let path = path.as_ref();
         check_writable(path)?;
-        let (bytes, stats) = self.encode()?;
-        write_bytes_atomic(path, &bytes)?;
-        Ok(stats)
+        let mut stats = None;
+        write_atomic(path, |w| {
+            stats = Some(self.write_to(w, path)?);
+            Ok(())
+        })?;
+        Ok(stats.expect("written above"))
     }
 
-    /// Writes the file to `w`.
+    /// Writes the file to `w`. The file is assembled in memory first (its header and grid
+    /// offsets are filled in last); for large volumes use [`VdbWriter::to_file`].
     pub fn to_writer(&self, mut w: impl Write) -> Result<VdbStats> {
-        let (bytes, stats) = self.encode()?;
-        w.write_all(&bytes)
-            .map_err(io_error(PathBuf::from("<vdb writer>")))?;
+        let name = PathBuf::from("<vdb writer>");
+        let mut file = Cursor::new(Vec::new());
+        let stats = self.write_to(&mut file, &name)?;
+        w.write_all(file.get_ref()).map_err(io_error(name))?;
         Ok(stats)
     }
 
-    /// Validates the options and the values, then assembles the whole file in memory (grid
-    /// offsets are absolute, so each grid is laid out before it is placed).
-    fn encode(&self) -> Result<(Vec<u8>, VdbStats)> {
+    /// Validates the options and the values, then writes the header, and each grid's
+    /// descriptor and body, streaming the leaf buffers; the UUID (a hash of the grid bodies) and
+    /// each grid's end offset are written last, over placeholders. `path` names `w` in errors.
+    fn write_to<W: Write + Seek>(&self, w: &mut W, path: &Path) -> Result<VdbStats> {
         let volume = self.volume;
         if !self.threshold.is_finite() {
             return Err(invalid(
@@ -218,95 +233,103 @@ impl<'a> VdbWriter<'a> {
             ));
         }
         if self.replace_non_finite.is_none() {
-            exported_channels(volume, features.end.max(4))?.check_finite("volume to export")?;
+            // Only the exported channels: NaNs elsewhere do not fail the export.
+            volume.check_finite_channels("volume to export", 0..features.end.max(4))?;
         }
 
-        let dims = volume.dims();
         let enc = Encoding {
             half: self.half,
             zlib: self.zlib,
         };
         let transform = Transform {
             placed: self.placed,
-            ..Transform::for_grid(volume.grid())
+            ..Transform::for_grid(&volume.grid())
         };
-        volume.with_values(|values| {
-            let plane = |c: usize| &values[c * dims.voxel_count()..(c + 1) * dims.voxel_count()];
-            let grid = |name: &'a str, channels: std::ops::Range<usize>| GridValues {
-                name,
-                planes: channels.map(plane).collect(),
-                replace_non_finite: self.replace_non_finite,
-            };
-            let mut grids = vec![
-                (grid(DENSITY_GRID, 0..1), "fog volume"),
-                (grid(COLOR_GRID, 1..4), "unknown"),
-            ];
-            grids.extend(features.map(|c| (grid(names[c].as_str(), c..c + 1), "unknown")));
+        let grid = |name: &'a str, channels: std::ops::Range<usize>| GridValues {
+            name,
+            channels,
+            replace_non_finite: self.replace_non_finite,
+        };
+        let mut grids = vec![
+            (grid(DENSITY_GRID, 0..1), "fog volume"),
+            (grid(COLOR_GRID, 1..4), "unknown"),
+        ];
+        grids.extend(features.map(|c| (grid(names[c].as_str(), c..c + 1), "unknown")));
+        let topology = Topology::build(volume, &grids[0].0, self.threshold)?;
 
-            let topology = Topology::build(&grids[0].0, dims, self.threshold)?;
-            let blobs = grids
-                .iter()
-                .map(|(g, class)| grid_blob(&topology, g, class, &transform, enc))
-                .collect::<Result<Vec<_>>>()?;
-
-            let uuid = meta::content_uuid(blobs.iter().map(|b| b.body.as_slice()));
-            let mut file = Vec::new();
-            meta::put_header(&mut file, &uuid, blobs.len() as u32);
-            for blob in &blobs {
-                blob.put(&mut file);
-            }
-            let stats = VdbStats {
-                leaves: topology.leaves().len(),
-                active_voxels: topology.active_voxels(),
-                bytes: file.len() as u64,
-            };
-            Ok((file, stats))
-        })?
+        let mut out = Output {
+            w,
+            path,
+            hash: ContentHash::new(),
+        };
+        let mut header = Vec::new();
+        meta::put_header_start(&mut header);
+        let uuid_at = header.len() as u64;
+        header.extend_from_slice(ContentHash::new().uuid().as_bytes());
+        meta::put_header_end(&mut header, grids.len() as u32);
+        out.put(&header, false)?;
+        for (g, class) in &grids {
+            out.put(&grid_head(g, enc), false)?;
+            let body = grid_body_head(&topology, g, class, &transform, enc);
+            let grid_pos = out.position()? + 24;
+            let end_at = grid_pos - 8;
+            let mut offsets = Vec::new();
+            offsets.put_i64(grid_pos as i64);
+            offsets.put_i64((grid_pos + body.len() as u64) as i64);
+            offsets.put_i64(0); // the end, filled in below
+            out.put(&offsets, false)?;
+            out.put(&body, true)?;
+            topology.write_buffers(&mut |bytes| out.put(bytes, true), volume, g, enc)?;
+            out.hash.end_part();
+            let end_pos = out.position()?;
+            out.put_at(end_at, &(end_pos as i64).to_le_bytes())?;
+        }
+        let bytes = out.position()?;
+        let uuid = out.hash.uuid();
+        out.put_at(uuid_at, uuid.as_bytes())?;
+        Ok(VdbStats {
+            leaves: topology.leaves().len(),
+            active_voxels: topology.active_voxels(),
+            bytes,
+        })
     }
 }
 
-/// The volume restricted to the channels an export writes, so that non-finite values in
-/// channels that are not exported do not fail it.
-fn exported_channels(volume: &RadianceVolume, channels: usize) -> Result<RadianceVolume> {
-    if channels == volume.channel_count() {
-        return Ok(volume.clone());
+/// A seekable destination that hashes the grid bodies as they pass.
+struct Output<'w, W> {
+    w: &'w mut W,
+    path: &'w Path,
+    hash: ContentHash,
+}
+
+impl<W: Write + Seek> Output<'_, W> {
+    /// Writes `bytes` at the end, feeding them to the hash when `hashed`.
+    fn put(&mut self, bytes: &[u8], hashed: bool) -> Result<()> {
+        if hashed {
+            self.hash.update(bytes);
+        }
+        self.w.write_all(bytes).map_err(io_error(self.path))
     }
-    let data: Tensor = volume.tensor().narrow(0, 0, channels)?;
-    RadianceVolume::new(data, volume.aabb())?
-        .with_channel_names(volume.channel_names()[..channels].to_vec())
-}
 
-/// One grid laid out with offsets relative to the start of its descriptor: the descriptor head
-/// (name, type, parent) and the grid body (compression, metadata, transform, topology, buffers).
-struct GridBlob {
-    head: Vec<u8>,
-    body: Vec<u8>,
-    /// Where the leaf buffers start inside `body`.
-    blocks_at: usize,
-}
+    /// Overwrites bytes at `at`, then returns to the end.
+    fn put_at(&mut self, at: u64, bytes: &[u8]) -> Result<()> {
+        (|| {
+            let end = self.w.stream_position()?;
+            self.w.seek(SeekFrom::Start(at))?;
+            self.w.write_all(bytes)?;
+            self.w.seek(SeekFrom::Start(end)).map(|_| ())
+        })()
+        .map_err(io_error(self.path))
+    }
 
-impl GridBlob {
-    /// Appends the descriptor with absolute offsets (`grid_pos`, `block_pos`, `end_pos`) and
-    /// the body.
-    fn put(&self, file: &mut Vec<u8>) {
-        file.extend_from_slice(&self.head);
-        let grid_pos = (file.len() + 24) as i64;
-        file.put_i64(grid_pos);
-        file.put_i64(grid_pos + self.blocks_at as i64);
-        file.put_i64(grid_pos + self.body.len() as i64);
-        file.extend_from_slice(&self.body);
+    fn position(&mut self) -> Result<u64> {
+        self.w.stream_position().map_err(io_error(self.path))
     }
 }
 
-fn grid_blob(
-    topology: &Topology,
-    grid: &GridValues<'_>,
-    class: &str,
-    transform: &Transform,
-    enc: Encoding,
-) -> Result<GridBlob> {
-    let vector = grid.planes.len() == 3;
-    let mut type_name = String::from(if vector {
+/// A grid descriptor's head: name, tree type, parent (none).
+fn grid_head(grid: &GridValues<'_>, enc: Encoding) -> Vec<u8> {
+    let mut type_name = String::from(if grid.channels.len() == 3 {
         "Tree_vec3s_5_4_3"
     } else {
         "Tree_float_5_4_3"
@@ -318,7 +341,18 @@ fn grid_blob(
     head.put_str(grid.name);
     head.put_str(&type_name);
     head.put_str(""); // not an instance of another grid
+    head
+}
 
+/// A grid body up to its leaf buffers: compression, metadata, transform and topology.
+fn grid_body_head(
+    topology: &Topology,
+    grid: &GridValues<'_>,
+    class: &str,
+    transform: &Transform,
+    enc: Encoding,
+) -> Vec<u8> {
+    let vector = grid.channels.len() == 3;
     let compression = COMPRESS_ACTIVE_MASK | if enc.zlib { COMPRESS_ZIP } else { 0 };
     let (bbox_min, bbox_max) = topology.active_bbox();
     let mut metadata = vec![
@@ -344,19 +378,12 @@ fn grid_blob(
     if vector {
         metadata.push(("vector_type", MetaValue::Str("invariant")));
     }
-
     let mut body = Vec::new();
     body.put_u32(compression);
     meta::put_metadata(&mut body, &metadata);
     transform.put(&mut body);
-    topology.put_topology(&mut body, grid.planes.len(), enc);
-    let blocks_at = body.len();
-    topology.put_buffers(&mut body, grid, enc)?;
-    Ok(GridBlob {
-        head,
-        body,
-        blocks_at,
-    })
+    topology.put_topology(&mut body, grid.channels.len(), enc);
+    body
 }
 
 /// Maps an error from vdb-rs to [`Error::InvalidFile`].

@@ -15,6 +15,8 @@ use rayon::prelude::*;
 use super::bytes::PutBytes;
 use crate::error::{beyond_half, invalid, Result};
 use crate::grid::GridDims;
+use crate::source::VolumeSource;
+use crate::VoxelRange;
 
 /// Voxels per leaf edge (log2 = 3).
 const LEAF_DIM: usize = 8;
@@ -69,23 +71,55 @@ pub(crate) struct Encoding {
     pub(crate) zlib: bool,
 }
 
-/// What one grid stores: its name (for errors) and, per voxel, `components` values taken from
-/// consecutive channel planes of the volume.
+/// What one grid stores: its name (for errors) and, per voxel, the values of consecutive
+/// channels of the source (1 for float grids, 3 for vec3 grids).
 pub(crate) struct GridValues<'a> {
     pub(crate) name: &'a str,
-    /// One `D * H * W` plane per component (1 for float grids, 3 for vec3 grids).
-    pub(crate) planes: Vec<&'a [f32]>,
+    pub(crate) channels: Range<usize>,
     /// Replaces NaN and infinities (validated beforehand when `None`).
     pub(crate) replace_non_finite: Option<f32>,
 }
 
 impl GridValues<'_> {
-    fn value(&self, plane: &[f32], offset: usize) -> f32 {
-        let v = plane[offset];
+    fn fix(&self, v: f32) -> f32 {
         match self.replace_non_finite {
             Some(r) if !v.is_finite() => r,
             _ => v,
         }
+    }
+
+    /// Reads this grid's channels over `region` of `source`.
+    fn read(&self, source: &dyn VolumeSource, region: VoxelRange) -> Result<Block> {
+        Ok(Block {
+            values: source.read_block(self.channels.clone(), &region)?,
+            region,
+        })
+    }
+}
+
+/// Values of some channels over a region, as [`VolumeSource::read_block`] returns them.
+struct Block {
+    region: VoxelRange,
+    values: Vec<f32>,
+}
+
+impl Block {
+    /// The value of component `c` at voxel `(x, y, z)` of the whole grid (inside the region).
+    fn at(&self, c: usize, [x, y, z]: [usize; 3]) -> f32 {
+        let d = self.region.dims();
+        let (r, at) = (&self.region, |v: usize, start: usize| v - start);
+        self.values
+            [c * d.voxel_count() + d.index(at(z, r.z.start), at(y, r.y.start), at(x, r.x.start))]
+    }
+}
+
+/// The voxels of the cube of side `span` at `origin` (index space `(x, y, z)`) inside `dims`.
+fn cube_region(origin: [i32; 3], span: usize, dims: GridDims) -> VoxelRange {
+    let [x, y, z] = origin.map(|c| c as usize);
+    VoxelRange {
+        z: z..(z + span).min(dims.d),
+        y: y..(y + span).min(dims.h),
+        x: x..(x + span).min(dims.w),
     }
 }
 
@@ -110,31 +144,41 @@ fn set_bit(mask: &mut [u64], i: usize) {
 }
 
 impl Topology {
-    /// Builds the tree over a `(D, H, W)` density plane: one leaf per 8^3 block that holds a
-    /// voxel with density `> threshold`, whose active voxels are exactly those.
-    pub(crate) fn build(density: &GridValues<'_>, dims: GridDims, threshold: f32) -> Result<Self> {
+    /// Builds the tree over the density grid of `source`: one leaf per 8^3 block that holds a
+    /// voxel with density `> threshold`, whose active voxels are exactly those. Reads the
+    /// density in slabs of whole leaves.
+    pub(crate) fn build(
+        source: &dyn VolumeSource,
+        density: &GridValues<'_>,
+        threshold: f32,
+    ) -> Result<Self> {
+        let dims = source.dims();
         if dims.xyz().iter().any(|&n| n > i32::MAX as usize - LEAF_DIM) {
             return Err(invalid(
                 "dims",
                 format!("{dims:?} exceeds the index range of a VDB grid (i32)"),
             ));
         }
-        let plane = density.planes[0];
         let blocks = dims.xyz().map(|n| n.div_ceil(LEAF_DIM));
-        let mut leaves: Vec<Leaf> = (0..blocks[0] * blocks[1] * blocks[2])
-            .into_par_iter()
-            .filter_map(|b| {
+        let slab_leaves = (source.slab_values() / (LEAF_DIM * dims.h * dims.w)).max(1);
+        let mut leaves: Vec<Leaf> = Vec::new();
+        for bz0 in (0..blocks[2]).step_by(slab_leaves) {
+            let bzs = bz0..(bz0 + slab_leaves).min(blocks[2]);
+            let z = bzs.start * LEAF_DIM..(bzs.end * LEAF_DIM).min(dims.d);
+            let slab = density.read(source, VoxelRange::z_slab(dims, z))?;
+            let per_slab = blocks[0] * blocks[1] * bzs.len();
+            leaves.par_extend((0..per_slab).into_par_iter().filter_map(|b| {
                 let (bx, by, bz) = (
-                    b / (blocks[1] * blocks[2]),
-                    b / blocks[2] % blocks[1],
-                    b % blocks[2],
+                    b / (blocks[1] * bzs.len()),
+                    b / bzs.len() % blocks[1],
+                    bzs.start + b % bzs.len(),
                 );
                 let origin = [bx, by, bz].map(|c| c * LEAF_DIM);
                 let mut mask = [0u64; 8];
                 for x in origin[0]..(origin[0] + LEAF_DIM).min(dims.w) {
                     for y in origin[1]..(origin[1] + LEAF_DIM).min(dims.h) {
                         for z in origin[2]..(origin[2] + LEAF_DIM).min(dims.d) {
-                            if density.value(plane, dims.index(z, y, x)) > threshold {
+                            if density.fix(slab.at(0, [x, y, z])) > threshold {
                                 set_bit(&mut mask, (x & 7) << 6 | (y & 7) << 3 | (z & 7));
                             }
                         }
@@ -144,8 +188,8 @@ impl Topology {
                     origin: origin.map(|c| c as i32),
                     mask,
                 })
-            })
-            .collect();
+            }));
+        }
         // Depth-first order: root children by origin (x, then y, then z, as OpenVDB's
         // `std::map<Coord, _>`), then child slots in index order.
         leaves.sort_by_key(|l| {
@@ -241,62 +285,72 @@ impl Topology {
         }
     }
 
-    /// Appends the buffer pass (`Tree::writeBuffers`) of one grid: per leaf, in the topology's
+    /// Writes the buffer pass (`Tree::writeBuffers`) of one grid: per leaf, in the topology's
     /// order, the active mask and the active values (all other values are the background 0).
-    /// Leaves are encoded in parallel. Fails if a half-float grid gets a value beyond the half
-    /// range.
-    pub(crate) fn put_buffers(
+    /// Reads the grid's values one lower internal node (a 128^3 brick) at a time and encodes its
+    /// leaves in parallel. Fails if a half-float grid gets a value beyond the half range.
+    pub(crate) fn write_buffers(
         &self,
-        buf: &mut Vec<u8>,
+        w: &mut dyn FnMut(&[u8]) -> Result<()>,
+        source: &dyn VolumeSource,
         grid: &GridValues<'_>,
         enc: Encoding,
     ) -> Result<()> {
-        let chunks: Vec<Vec<u8>> = self
-            .leaves
-            .par_iter()
-            .map(|leaf| self.leaf_buffer(leaf, grid, enc))
-            .collect::<Result<_>>()?;
-        let total: usize = chunks.iter().map(Vec::len).sum();
-        buf.reserve(total);
-        chunks.iter().for_each(|c| buf.extend_from_slice(c));
+        for node in self.roots.iter().flat_map(|r| &r.nodes) {
+            let leaves = &self.leaves[node.leaves.clone()];
+            let origin = leaves[0].origin.map(|c| c & !(NODE4_SPAN - 1));
+            let brick = grid.read(source, cube_region(origin, NODE4_SPAN as usize, self.dims))?;
+            let chunks: Vec<Vec<u8>> = leaves
+                .par_iter()
+                .map(|leaf| leaf_buffer(leaf, &brick, grid, enc))
+                .collect::<Result<_>>()?;
+            chunks.iter().try_for_each(|c| w(c))?;
+        }
         Ok(())
     }
+}
 
-    fn leaf_buffer(&self, leaf: &Leaf, grid: &GridValues<'_>, enc: Encoding) -> Result<Vec<u8>> {
-        let mut out = Vec::with_capacity(65 + 512 * 4 * grid.planes.len());
-        leaf.mask
-            .iter()
-            .for_each(|&m| out.extend_from_slice(&m.to_le_bytes()));
-        out.put_u8(NODE_META_ACTIVE_ONLY);
-        let bytes_per = if enc.half { 2 } else { 4 };
-        let mut raw = Vec::with_capacity(512 * bytes_per * grid.planes.len());
-        for i in leaf.active() {
-            let [x, y, z] = [
-                leaf.origin[0] as usize + (i >> 6),
-                leaf.origin[1] as usize + ((i >> 3) & 7),
-                leaf.origin[2] as usize + (i & 7),
-            ];
-            let offset = self.dims.index(z, y, x);
-            for plane in &grid.planes {
-                let v = grid.value(plane, offset);
-                if enc.half {
-                    let h = f16::from_f32(v);
-                    if h.is_infinite() && v.is_finite() {
-                        return Err(beyond_half(
-                            &format!("grid `{}`", grid.name),
-                            v,
-                            &format!("index ({x}, {y}, {z})"),
-                        ));
-                    }
-                    raw.extend_from_slice(&h.to_le_bytes());
-                } else {
-                    raw.extend_from_slice(&v.to_le_bytes());
+/// One leaf's buffer: its active mask, then its active values from `brick`.
+fn leaf_buffer(
+    leaf: &Leaf,
+    brick: &Block,
+    grid: &GridValues<'_>,
+    enc: Encoding,
+) -> Result<Vec<u8>> {
+    let components = grid.channels.len();
+    let mut out = Vec::with_capacity(65 + 512 * 4 * components);
+    leaf.mask
+        .iter()
+        .for_each(|&m| out.extend_from_slice(&m.to_le_bytes()));
+    out.put_u8(NODE_META_ACTIVE_ONLY);
+    let bytes_per = if enc.half { 2 } else { 4 };
+    let mut raw = Vec::with_capacity(512 * bytes_per * components);
+    for i in leaf.active() {
+        let xyz = [
+            leaf.origin[0] as usize + (i >> 6),
+            leaf.origin[1] as usize + ((i >> 3) & 7),
+            leaf.origin[2] as usize + (i & 7),
+        ];
+        for c in 0..components {
+            let v = grid.fix(brick.at(c, xyz));
+            if enc.half {
+                let h = f16::from_f32(v);
+                if h.is_infinite() && v.is_finite() {
+                    let [x, y, z] = xyz;
+                    return Err(beyond_half(
+                        &format!("grid `{}`", grid.name),
+                        v,
+                        &format!("index ({x}, {y}, {z})"),
+                    ));
                 }
+                raw.extend_from_slice(&h.to_le_bytes());
+            } else {
+                raw.extend_from_slice(&v.to_le_bytes());
             }
         }
-        put_values(&mut out, &raw, enc);
-        Ok(out)
     }
+    put_values(&mut out, &raw, enc);
+    Ok(out)
 }
 
 /// Appends an internal node's child mask, an all-off value mask (no tiles) and its value array.
@@ -357,15 +411,22 @@ mod tests {
     #[test]
     fn leaves_cover_occupied_blocks_only() {
         let dims = GridDims::new(9, 3, 17); // z, y, x
-        let mut plane = vec![0f32; dims.voxel_count()];
-        plane[dims.index(8, 2, 16)] = 1.0; // block (2, 0, 1)
-        plane[dims.index(0, 0, 0)] = 0.5; // block (0, 0, 0), below the threshold
+        let mut values = vec![0f32; 4 * dims.voxel_count()];
+        values[dims.index(8, 2, 16)] = 1.0; // block (2, 0, 1)
+        values[dims.index(0, 0, 0)] = 0.5; // block (0, 0, 0), below the threshold
+        let tensor = candle_core::Tensor::from_vec(
+            values,
+            (4, dims.d, dims.h, dims.w),
+            &candle_core::Device::Cpu,
+        )
+        .unwrap();
+        let volume = crate::RadianceVolume::new(tensor, crate::Aabb::CUBE).unwrap();
         let g = GridValues {
             name: "density",
-            planes: vec![&plane],
+            channels: 0..1,
             replace_non_finite: None,
         };
-        let t = Topology::build(&g, dims, 0.5).unwrap();
+        let t = Topology::build(&volume, &g, 0.5).unwrap();
         assert_eq!(t.leaves().len(), 1);
         assert_eq!(t.leaves()[0].origin, [16, 0, 8]);
         assert_eq!(t.active_voxels(), 1);
