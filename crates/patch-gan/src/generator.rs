@@ -78,7 +78,7 @@ impl Generator3dConfig {
                 format!("need at least 2, got {}", self.layers),
             ));
         }
-        if self.kernel % 2 == 0 {
+        if self.kernel.is_multiple_of(2) {
             return Err(invalid(
                 "Generator3d kernel",
                 format!("must be odd, got {}", self.kernel),
