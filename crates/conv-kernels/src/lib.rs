@@ -1,7 +1,10 @@
 //! CPU kernels of volgen's convolutions, on plain slices: the chunked im2col + `gemm`
 //! convolution ([`im2col`]), Winograd's F(2, 3) and F(4, 3) for 3-tap kernels with AVX2 + FMA
-//! products of its own ([`winograd`]), and the fused element loops between convolutions
-//! (BatchNorm, LeakyReLU, per-channel sums: [`fused`]). patch-gan wraps them in candle ops.
+//! products of its own and 16-lane AVX-512 transforms ([`winograd`]), and the fused element
+//! loops between convolutions (BatchNorm, LeakyReLU, per-channel sums: [`fused`]). patch-gan
+//! wraps them in candle ops. Large outputs come from, and can be handed back to, a pool of
+//! buffers ([`recycle`]), so that a training loop does not fault its temporaries in anew each
+//! step.
 //!
 //! Tensors are contiguous row-major slices of `f32` or `f64` ([`Element`]): a convolution's
 //! input `(N, C_in, D, H, W)`, kernel `(C_out, C_in, kd, kh, kw)` and output
@@ -45,16 +48,21 @@
 //! on a mismatch, so no argument a safe caller can pass reaches undefined behaviour. `unsafe`
 //! is used for three things only:
 //!
-//! - **SIMD behind run-time feature detection.** Functions compiled with
-//!   `#[target_feature(enable = "avx2")]` (or `"avx2,fma"`) are called only after
-//!   `is_x86_feature_detected!` found those features (cached per process), with the portable
-//!   build (`gemm` for the products) on every other CPU, both always compiled. The Winograd
-//!   products use AVX2 + FMA intrinsics on f32 for CPUs without AVX-512 (with AVX-512, `gemm`'s
-//!   16-lane kernels are faster), reading and writing through raw pointers whose extents the
-//!   callers derive from the tiling; the f32-only kernels cast pointers after checking
-//!   [`Element::IS_F32`], which is why [`Element`] is sealed. The other AVX2 builds are the same
-//!   Rust code as their portable build, compiled for wider vectors: Rust neither fuses
-//!   multiplies and adds nor reorders sums, so they give the same bits.
+//! - **SIMD behind run-time feature detection** ([`Isa`]). Functions compiled with
+//!   `#[target_feature(enable = "avx2,fma")]` or `"avx512f"` run only after
+//!   `is_x86_feature_detected!` found those features (cached per process; a kernel asks once
+//!   per call and hands the answer to its tasks), with the portable build (`gemm` for the
+//!   products) on every other CPU, all always compiled. The Winograd products use AVX2 + FMA
+//!   intrinsics on f32 for CPUs without AVX-512 (with AVX-512, `gemm`'s 16-lane kernels are
+//!   faster), and the Winograd transforms AVX-512 intrinsics on f32 (16 lanes, masked tails,
+//!   permutes for the rows' phases) where the CPU has them, both reading and writing through
+//!   raw pointers whose extents they check or the callers derive from the tiling; the f32-only
+//!   kernels cast pointers after checking [`Element::IS_F32`], which is why [`Element`] is
+//!   sealed. The 16-lane vectors are a private type that only those `avx512f` functions make,
+//!   so its operators, which call the intrinsics, run only where AVX-512 was found. The other
+//!   AVX2 builds are the same Rust code as their portable build, compiled for wider vectors,
+//!   and the 16-lane transforms do the portable transforms' operations in the same order: Rust
+//!   neither fuses multiplies and adds nor reorders sums, so they give the same bits.
 //! - **Matrix products through `gemm`**, whose API takes raw pointers and strides: each call
 //!   reads and writes inside the slices its dimensions and strides imply.
 //! - **Output buffers filled in parallel without zeroing them first.** A kernel that writes
@@ -71,32 +79,37 @@
 //! `clippy::undocumented_unsafe_blocks`), and every `unsafe fn` states its contract under
 //! `# Safety`.
 //!
-//! Every SIMD path is tested against a reference on the CPU running the tests: the AVX2 + FMA
-//! products against sums in f64 (every block shape, tails and accumulation), the AVX2 builds of
-//! the per-channel sums against their portable build bit for bit, and the Winograd passes
-//! (which take the AVX2 builds where the CPU has them) against the im2col kernel in f64, and in
-//! f32 within a stated factor of its rounding. A CPU without AVX2 runs the portable paths in
-//! the same tests.
+//! Every SIMD path is tested against a reference on the CPU running the tests, each
+//! instruction set the CPU has forced in turn (a per-thread limit on [`Isa`] that only the
+//! tests set), so a CPU with AVX-512 tests the AVX2 and portable paths too: the products
+//! against sums in f64 (every block shape, tails and accumulation), the AVX2 builds of the
+//! per-channel sums and the 16-lane transforms against their portable builds bit for bit, and
+//! the Winograd passes against the im2col kernel in f64, and in f32 within a stated factor of
+//! its rounding against sums in f64. A CPU without AVX2 runs the portable paths in the same
+//! tests.
 
 // The workspace denies `unsafe` code; this crate is where the convolutions' lives (above).
 #![allow(unsafe_code)]
 #![deny(unsafe_op_in_unsafe_fn)]
 #![warn(missing_docs, clippy::undocumented_unsafe_blocks)]
 
+mod buffers;
 mod element;
 pub mod fused;
 mod geometry;
 pub mod im2col;
+mod isa;
 mod output;
 mod scratch;
-mod simd;
 pub mod winograd;
 
+pub use buffers::{recycle, recycled};
 pub use element::Element;
 pub use geometry::Geometry;
 pub use im2col::{Chunk, Columns};
+pub use isa::Isa;
 
-/// The README's examples, compiled and run as doc tests.
-#[cfg(doctest)]
+/// The README's example, run as a doctest.
 #[doc = include_str!("../README.md")]
-pub struct ReadmeDoctests;
+#[cfg(doctest)]
+struct ReadmeExample;

@@ -12,11 +12,12 @@ use rayon::prelude::*;
 
 use crate::element::Element;
 
-/// An empty vector with room for `len` values, for a kernel that writes all of them through
-/// its pointer before calling `set_len(len)`. Debug builds (the tests) fill the room with NaN
-/// first, so that a value the kernel missed shows up in its results.
+/// An empty vector with room for `len` values (a recycled one where there is one: see
+/// [`crate::buffers`]), for a kernel that writes all of them through its pointer before calling
+/// `set_len(len)`. Debug builds (the tests) fill the room with NaN first, so that a value the
+/// kernel missed shows up in its results.
 pub(crate) fn unwritten<T: Element>(len: usize) -> Vec<T> {
-    let mut values = Vec::with_capacity(len);
+    let mut values = crate::buffers::recycled(len);
     if cfg!(debug_assertions) {
         values.resize(len, T::from_f64(f64::NAN));
         values.clear();

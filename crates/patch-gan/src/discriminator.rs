@@ -7,9 +7,9 @@ use rand::Rng;
 
 use crate::conv::{layer_tensors, op, ConvConfig};
 use crate::error::{invalid, Result};
-use crate::fused::{bias_leaky_relu, conv_bias_leaky, leaky_grad};
+use crate::fused::{bias_leaky_relu, conv_bias_leaky, critic};
 use crate::norm::LEAKY_SLOPE;
-use crate::wgan::{mixed_images, penalty_of_gradient, GradientPenalty};
+use crate::wgan::{draw_alphas, GradientPenalty};
 
 /// Receptive field, in pixels (voxels) along each axis, of `layers` unpadded 3x3 (3x3x3) stride-1
 /// convolutions: each layer widens it by 2, so it is `2 L + 1` (11 for L = 5, 15 for L = 7). One
@@ -174,6 +174,10 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
     /// pass (half the convolution calls, each on twice the inputs). `real` and `fake` may hold
     /// different numbers of images (volumes) of the same channels and size.
     ///
+    /// On the CPU the whole critic and the loss are one op each way, on buffers the next step
+    /// reuses: differentiable once (in the weights, and in `real` and `fake` where they are part
+    /// of the graph); [`Module::forward`] remains for higher orders.
+    ///
     /// ```
     /// use candle_core::{DType, Device, Module, Tensor};
     /// use candle_nn::{VarBuilder, VarMap};
@@ -200,6 +204,12 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
                     fake.shape()
                 ),
             ));
+        }
+        if real.device().is_cpu() {
+            self.check_input(real)?;
+            let params = critic::pack_interleaved(&self.kernels()?, &self.biases())?;
+            let inputs = (&Self::lift(real)?, &Self::lift(fake)?);
+            return Ok(critic::critic_loss(inputs, &params, &self.layers()?)?);
         }
         let maps = self.forward(&Tensor::cat(&[real, fake], 0)?)?;
         let patches = maps.elem_count() / (n_real + n_fake);
@@ -229,10 +239,12 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
     /// `W_1^T M_1 W_2^T ... M_{L-1} W_L^T 1`, with `M_k` the LeakyReLU slopes of layer `k` at those
     /// inputs, which do not change under a small change of the weights (nor do the biases enter
     /// it). So the forward pass runs on constants and only records the slopes, and the gradient
-    /// is written as a chain of transposed convolutions whose backward pass is the penalty's
-    /// exact gradient: a forward convolution and a kernel gradient per layer, where the generic
+    /// is a chain of transposed convolutions whose backward pass is the penalty's exact
+    /// gradient: a forward convolution and a kernel gradient per layer, where the generic
     /// double backward also computes the unused weight and bias gradients of the first backward.
-    /// On other devices than the CPU it is the generic function.
+    /// The mixing, the layers, the chain and the penalty are one op each way, on buffers the
+    /// next step reuses; the biases get no gradient from it. On other devices than the CPU it is
+    /// the generic function.
     ///
     /// ```
     /// use candle_core::{DType, Device, Tensor};
@@ -263,32 +275,50 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
         if !real.device().is_cpu() {
             return crate::wgan::gradient_penalty(self, real, fake, penalty, rng);
         }
-        let mixed = mixed_images(real, fake, rng)?;
-        self.check_input(&mixed)?;
-        // Each hidden layer's input dims and output (whose sign is the LeakyReLU branch).
-        let mut layers = Vec::with_capacity(self.blocks.len());
-        let mut x = Self::lift(&mixed)?;
-        for layer in &self.blocks {
-            let convolved = Self::conv(&x, &layer.weight.detach())?;
-            let y = bias_leaky_relu(&convolved, &layer.bias.detach(), LEAKY_SLOPE)?;
-            layers.push((x.dims().to_vec(), y.clone()));
-            x = y;
-        }
-        // d sum(D) / d (tail output) is all ones; the tail's output has one channel and is
-        // `KERNEL - 1` smaller along each spatial axis.
-        let mut out_dims = x.dims().to_vec();
-        out_dims[1] = 1;
-        let rank = out_dims.len();
-        for side in &mut out_dims[rank - AXES..] {
-            *side = *side + 1 - KERNEL;
-        }
-        let ones = Tensor::ones(out_dims, x.dtype(), x.device())?;
-        let mut grad = Self::conv_grad_input(&ones, &self.tail.weight, x.dims())?;
-        for (layer, (input_dims, output)) in self.blocks.iter().zip(layers).rev() {
-            let pre = leaky_grad(&grad, &output, LEAKY_SLOPE)?;
-            grad = Self::conv_grad_input(&pre, &layer.weight, &input_dims)?;
-        }
-        penalty_of_gradient(&grad, penalty)
+        let alphas = draw_alphas(real, fake, rng)?;
+        self.check_input(real)?;
+        let params = critic::pack_weights_first(&self.kernels()?, &self.biases())?;
+        let inputs = (&Self::lift(real)?, &Self::lift(fake)?);
+        Ok(critic::penalty(
+            inputs,
+            alphas,
+            &params,
+            (&self.layers()?, penalty),
+        )?)
+    }
+
+    /// Every layer's kernel as the 3D convolution op takes it ([`Self::kernel_3d`]).
+    fn kernels(&self) -> Result<Vec<Tensor>> {
+        self.blocks
+            .iter()
+            .chain([&self.tail])
+            .map(|layer| Self::kernel_3d(&layer.weight))
+            .collect()
+    }
+
+    /// Every layer's bias.
+    fn biases(&self) -> Vec<&Tensor> {
+        self.blocks
+            .iter()
+            .chain([&self.tail])
+            .map(|layer| &layer.bias)
+            .collect()
+    }
+
+    /// The layers as the fused critic ops take them.
+    fn layers(&self) -> Result<critic::Layers> {
+        let kernels = self
+            .kernels()?
+            .iter()
+            .map(|k| match *k.dims() {
+                [c_out, c_in, kd, kh, kw] => Ok([c_out, c_in, kd, kh, kw]),
+                _ => Err(invalid("PatchDiscriminator", "a kernel that is not 3D")),
+            })
+            .collect::<Result<_>>()?;
+        Ok(critic::Layers {
+            kernels,
+            slope: LEAKY_SLOPE,
+        })
     }
 
     /// The critic's inputs as the layers take them: on the CPU, images get a depth axis of 1 once
@@ -330,17 +360,6 @@ impl<const AXES: usize> PatchDiscriminator<AXES> {
         } else {
             op::conv3d(xs, &Self::kernel_3d(weight)?, ConvConfig::default())
         }
-    }
-
-    /// The input gradient of [`Self::conv`] for an input of `input_dims` as [`Self::lift`] leaves
-    /// it on the CPU (the only device the penalty's own graph runs on).
-    fn conv_grad_input(grad_out: &Tensor, weight: &Tensor, input_dims: &[usize]) -> Result<Tensor> {
-        op::conv3d_grad_input(
-            grad_out,
-            &Self::kernel_3d(weight)?,
-            ConvConfig::default(),
-            input_dims,
-        )
     }
 
     /// Errors unless `xs` has `AXES` spatial axes, each at least the receptive field.

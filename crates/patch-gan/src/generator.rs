@@ -6,6 +6,7 @@ use candle_core::{ModuleT, Tensor};
 use candle_nn::{Module, VarBuilder};
 
 use crate::active::{self, ActiveSites};
+use crate::conv::op::Domain;
 use crate::conv::{conv3d, op, Conv3d, ConvConfig};
 use crate::error::{invalid, Result};
 use crate::fused::{bias_add, conv_norm_stack};
@@ -77,7 +78,7 @@ impl Generator3dConfig {
                 format!("need at least 2, got {}", self.layers),
             ));
         }
-        if self.kernel % 2 == 0 {
+        if self.kernel.is_multiple_of(2) {
             return Err(invalid(
                 "Generator3d kernel",
                 format!("must be odd, got {}", self.kernel),
@@ -212,15 +213,21 @@ impl Generator3d {
         if !prev_up.device().is_cpu() {
             return self.forward_residual_active_dense(z, prev_up, sites, train);
         }
-        let mut h = active::gather(&input, sites)?;
-        for (conv, bn) in &self.blocks {
-            let convolved = op::conv3d_active(&h, conv.weight(), sites)?;
-            h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
-        }
-        let mut residual = op::conv3d_active(&h, self.tail.weight(), sites)?;
-        if let Some(bias) = self.tail.bias() {
-            residual = crate::fused::bias_add(&residual, bias)?;
-        }
+        let h = active::gather(&input, sites)?;
+        let residual = if train {
+            self.forward_stack(&h, Domain::active(sites))?
+        } else {
+            let mut h = h;
+            for (conv, bn) in &self.blocks {
+                let convolved = op::conv3d_active(&h, conv.weight(), sites)?;
+                h = bn.forward_activated(&convolved, conv.bias(), LEAKY_SLOPE, train)?;
+            }
+            let residual = op::conv3d_active(&h, self.tail.weight(), sites)?;
+            match self.tail.bias() {
+                Some(bias) => bias_add(&residual, bias)?,
+                None => residual,
+            }
+        };
         Ok((prev_up + active::scatter(&residual, sites)?)?)
     }
 
@@ -325,21 +332,18 @@ impl Generator3d {
 }
 
 impl Generator3d {
-    /// [`ModuleT::forward_t`] in training mode on the CPU: every layer in one op (the same
-    /// kernels and bits as layer by layer; see [`crate::fused::conv_norm_stack`]), then the
-    /// last layer's bias. The blocks' convolutions have biases that batch statistics cancel:
-    /// they go to the running means only.
-    fn forward_train_cpu(&self, xs: &Tensor) -> candle_core::Result<Tensor> {
+    /// The generator in training mode on the CPU, its convolutions in `domain` (the grid, or
+    /// active sites): every layer in one op (the same kernels and bits as layer by layer; see
+    /// [`crate::fused::conv_norm_stack`]), then the last layer's bias. The blocks'
+    /// convolutions have biases that batch statistics cancel: they go to the running means only.
+    fn forward_stack(&self, xs: &Tensor, domain: Domain) -> candle_core::Result<Tensor> {
         let blocks: Vec<_> = self
             .blocks
             .iter()
             .map(|(conv, bn)| bn.stack_block(conv.weight()))
             .collect();
         let eps_slope = (NORM_EPS, LEAKY_SLOPE);
-        // One configuration for all layers, as `Generator3d::new` builds them.
-        let cfg = self.tail.config();
-        debug_assert!(self.blocks.iter().all(|(conv, _)| conv.config() == cfg));
-        let (ys, stats) = conv_norm_stack(xs, &blocks, self.tail.weight(), cfg, eps_slope)?;
+        let (ys, stats) = conv_norm_stack(xs, &blocks, self.tail.weight(), domain, eps_slope)?;
         for ((conv, bn), stats) in self.blocks.iter().zip(stats) {
             bn.record(stats, conv.bias())?;
         }
@@ -353,7 +357,10 @@ impl Generator3d {
 impl ModuleT for Generator3d {
     fn forward_t(&self, xs: &Tensor, train: bool) -> candle_core::Result<Tensor> {
         if train && xs.device().is_cpu() {
-            return self.forward_train_cpu(xs);
+            // One configuration for all layers, as `Generator3d::new` builds them.
+            let cfg = self.tail.config();
+            debug_assert!(self.blocks.iter().all(|(conv, _)| conv.config() == cfg));
+            return self.forward_stack(xs, Domain::grid(cfg));
         }
         let mut h = xs.clone();
         for (conv, bn) in &self.blocks {

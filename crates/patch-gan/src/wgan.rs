@@ -64,7 +64,7 @@ impl Default for GradientPenalty {
 }
 
 /// Keeps `sqrt` differentiable where the critic's input gradient vanishes.
-const NORM_EPS: f64 = 1e-12;
+pub(crate) const NORM_EPS: f64 = 1e-12;
 
 /// The WGAN-GP gradient penalty `weight * mean((||grad_x critic(x_hat)|| - 1)^2)` at
 /// `x_hat = a real + (1 - a) fake`, with one `a ~ U[0, 1)` per image drawn from `rng`.
@@ -128,11 +128,22 @@ pub fn gradient_penalty<C: Module + ?Sized, R: Rng + ?Sized>(
 
 /// `a real + (1 - a) fake` with one `a ~ U[0, 1)` per image drawn from `rng`, detached; errors
 /// unless `real` and `fake` are equal batched shapes.
-pub(crate) fn mixed_images<R: Rng + ?Sized>(
+fn mixed_images<R: Rng + ?Sized>(real: &Tensor, fake: &Tensor, rng: &mut R) -> Result<Tensor> {
+    let alphas = draw_alphas(real, fake, rng)?;
+    let mut alpha_shape = vec![1; real.rank()];
+    alpha_shape[0] = alphas.len();
+    let alpha = Tensor::from_vec(alphas, alpha_shape, real.device())?.to_dtype(real.dtype())?;
+    let mixed = (real.broadcast_mul(&alpha)? + fake.broadcast_mul(&alpha.affine(-1.0, 1.0)?)?)?;
+    Ok(mixed.detach())
+}
+
+/// The mixing weights of [`gradient_penalty`]: one `a ~ U[0, 1)` per image drawn from `rng`;
+/// errors unless `real` and `fake` are equal batched shapes.
+pub(crate) fn draw_alphas<R: Rng + ?Sized>(
     real: &Tensor,
     fake: &Tensor,
     rng: &mut R,
-) -> Result<Tensor> {
+) -> Result<Vec<f64>> {
     if real.shape() != fake.shape() || real.rank() < 2 {
         return Err(invalid(
             "gradient penalty inputs",
@@ -143,18 +154,12 @@ pub(crate) fn mixed_images<R: Rng + ?Sized>(
             ),
         ));
     }
-    let n = real.dim(0)?;
-    let alphas: Vec<f64> = (0..n).map(|_| rng.random::<f64>()).collect();
-    let mut alpha_shape = vec![1; real.rank()];
-    alpha_shape[0] = n;
-    let alpha = Tensor::from_vec(alphas, alpha_shape, real.device())?.to_dtype(real.dtype())?;
-    let mixed = (real.broadcast_mul(&alpha)? + fake.broadcast_mul(&alpha.affine(-1.0, 1.0)?)?)?;
-    Ok(mixed.detach())
+    Ok((0..real.dim(0)?).map(|_| rng.random::<f64>()).collect())
 }
 
 /// `weight * mean((||grad|| - 1)^2)` of the critic's input gradient `grad`, the norm taken as
 /// `penalty.norm` says.
-pub(crate) fn penalty_of_gradient(grad: &Tensor, penalty: GradientPenalty) -> Result<Tensor> {
+fn penalty_of_gradient(grad: &Tensor, penalty: GradientPenalty) -> Result<Tensor> {
     let sq = grad.sqr()?;
     let norms = match penalty.norm {
         GradientNorm::PerPixel => sq.sum_keepdim(1)?,

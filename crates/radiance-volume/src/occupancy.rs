@@ -214,8 +214,8 @@ impl OccupancyGrid {
 fn cells_of_voxel(v: usize, k: usize, cells: usize) -> [Option<usize>; 3] {
     let own = v / k;
     // v is the last voxel before cell own+1: that cell's footprint starts one voxel early.
-    let next = ((v + 1) % k == 0 && own + 1 < cells).then_some(own + 1);
+    let next = ((v + 1).is_multiple_of(k) && own + 1 < cells).then_some(own + 1);
     // v is the first voxel of its cell: the previous cell's footprint ends one voxel late.
-    let prev = (v % k == 0 && own > 0).then(|| own - 1);
+    let prev = (v.is_multiple_of(k) && own > 0).then(|| own - 1);
     [Some(own), next, prev]
 }

@@ -71,7 +71,7 @@ pub fn physical_upsampled_source(
     density: DensityInterpolation,
     factor: usize,
 ) -> Result<Resampled> {
-    if factor % 2 == 0 {
+    if factor.is_multiple_of(2) {
         return Err(invalid(
             "upsampling factor",
             format!(

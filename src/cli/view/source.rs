@@ -60,9 +60,13 @@ impl Source {
             "{}: no such run, directory or volume",
             path.display()
         );
-        let checkpoint = singrav::checkpoint::checkpoint_path(path);
-        let is_run = checkpoint.is_file()
-            && checkpoint.file_name() == Some(std::ffi::OsStr::new("checkpoint.safetensors"));
+        // A run directory, or the checkpoint file of one (not any `.safetensors`).
+        let run = singrav::RunDir::of_model(path);
+        let is_run = if path.is_dir() {
+            run.has_checkpoint()
+        } else {
+            run.checkpoint() == path
+        };
         if is_run {
             let model = load_model(path)?;
             let extent = (model.extent(), Outside::default());

@@ -48,8 +48,8 @@ fn lane_sums<T: Element, const K: usize>(
     f: impl Fn(T, T) -> [f64; K],
 ) -> [f64; K] {
     #[cfg(target_arch = "x86_64")]
-    if crate::simd::has_avx2() {
-        // SAFETY: the CPU has AVX2 (checked just above).
+    if crate::Isa::current() >= crate::Isa::Avx2 {
+        // SAFETY: the CPU has AVX2 (`Isa` is never above the CPU's).
         return unsafe { lane_sums_avx2(a, b, f) };
     }
     lane_sums_body(a, b, f)
@@ -182,7 +182,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_build_of_lane_sums_gives_the_same_bits() {
-        if !crate::simd::has_avx2() {
+        if crate::Isa::detected() < crate::Isa::Avx2 {
             return;
         }
         let a: Vec<f32> = (0..1003).map(|i| (i as f32 * 0.37).sin()).collect();

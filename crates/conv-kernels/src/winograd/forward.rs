@@ -6,13 +6,14 @@ use rayon::prelude::*;
 
 use super::minimal::{transform_weights, Minimal, F2, F4};
 use super::products::forward_product;
-use super::rows::interleave;
+use super::rows::{Blocks, RowKernels};
 use super::tiles::{fill_transformed_inputs, transform_outputs};
-use super::{matrix_stride, scratch_for, ForwardScratch, Plan, Tile};
+use super::{matrix_stride, scratch_for, Build, ForwardScratch, Plan, Tile};
+use crate::buffers::recycle;
 use crate::element::Element;
 use crate::geometry::Geometry;
+use crate::isa::Isa;
 use crate::output::{unwritten, SharedMut};
-use crate::simd::has_avx2;
 
 /// What every chunk of a forward pass reads.
 struct ForwardPass<'a, T> {
@@ -22,12 +23,14 @@ struct ForwardPass<'a, T> {
     g: &'a Geometry,
     plan: &'a Plan,
     y: SharedMut<T>,
+    isa: Isa,
 }
 
 /// One chunk of a forward pass: transform its input tiles, multiply per position, transform
 /// the products back and write the outputs.
 #[inline(always)]
 fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     pass: &ForwardPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
     (n, row0, rows): (usize, usize, usize),
@@ -42,11 +45,12 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     let (half, cols) = (plan.row_cols(), rows * plan.row_cols());
     let ld = matrix_stride(cols);
     let x_n = &pass.x[n * ci * in_vox..];
-    fill_transformed_inputs::<T, W, M, N>(v, bufs, x_n, g, plan, (row0, rows));
+    fill_transformed_inputs::<T, W, M, N>(kernels, v, bufs, x_n, g, plan, (row0, rows));
     for pos in 0..p {
         // SAFETY: U[pos] is co x ci, V[pos] ci x ld, M[pos] co x ld, all in bounds.
         unsafe {
             forward_product(
+                pass.isa,
                 (co, ci, ld),
                 m[pos * co * ld..].as_mut_ptr(),
                 pass.u[pos * co * ci..].as_ptr(),
@@ -56,7 +60,7 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     }
     let width = M * cols;
     for c in 0..co {
-        transform_outputs::<T, W, M, N>(bufs, m, (c, co), plan, cols);
+        transform_outputs::<T, W, M, N>(kernels, bufs, m, (c, co), plan, cols);
         for r in 0..rows {
             let (td, th) = plan.row_tiles(row0 + r);
             for a in 0..ad.outs {
@@ -71,25 +75,48 @@ fn forward_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
                     // only, and no other reference to it exists.
                     let row =
                         unsafe { std::slice::from_raw_parts_mut(pass.y.ptr().add(at), out[2]) };
-                    interleave::<T, M>(row, phases, cols);
+                    kernels.interleave::<T, M>(row, phases, cols);
                 }
             }
         }
     }
 }
 
-/// [`forward_chunk`] compiled for AVX2, whose 8-wide vectors the transforms use.
+/// [`forward_chunk`] compiled for AVX2 and FMA: with [`Blocks`], the transforms in 8-wide
+/// vectors; with the AVX-512 row kernels, the rest of the chunk's work.
 ///
 /// # Safety
-/// The CPU must have AVX2.
+/// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 unsafe fn forward_chunk_avx2<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     pass: &ForwardPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
     chunk: (usize, usize, usize),
 ) {
-    forward_chunk::<T, W, M, N>(pass, scratch, chunk)
+    forward_chunk::<T, W, M, N>(kernels, pass, scratch, chunk)
+}
+
+/// [`forward_chunk`] in `build`.
+#[inline(always)]
+fn forward_chunk_in<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    build: Build,
+    pass: &ForwardPass<'_, T>,
+    scratch: &mut ForwardScratch<T>,
+    chunk: (usize, usize, usize),
+) {
+    match build {
+        Build::Portable => forward_chunk::<T, W, M, N>(Blocks, pass, scratch, chunk),
+        // SAFETY: a `Build` names AVX2 only on a CPU with AVX2 and FMA (`Build::of`).
+        #[cfg(target_arch = "x86_64")]
+        Build::Avx2 => unsafe { forward_chunk_avx2::<T, W, M, N>(Blocks, pass, scratch, chunk) },
+        // SAFETY: as above; AVX-512 implies AVX2 and FMA here (`Isa`).
+        #[cfg(target_arch = "x86_64")]
+        Build::Avx512(wide) => unsafe {
+            forward_chunk_avx2::<T, W, M, N>(wide, pass, scratch, chunk)
+        },
+    }
 }
 
 /// [`super::forward`] with the given tile.
@@ -106,7 +133,8 @@ fn forward_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
     w: &[T],
     g: &Geometry,
 ) -> Vec<T> {
-    let plan = Plan::new(g, M);
+    let isa = Isa::current();
+    let plan = Plan::new(g, M, isa);
     let u = transform_weights::<T, W, M, N>(w, g);
     let out_vox: usize = g.output().iter().product();
     let mut y = unwritten::<T>(g.batch * g.c_out * out_vox);
@@ -116,21 +144,14 @@ fn forward_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
         g,
         plan: &plan,
         y: SharedMut(y.as_mut_ptr()),
+        isa,
     };
-    let avx2 = has_avx2();
-    let _ = avx2; // read by the x86-64 branch only
+    let build = Build::of(isa);
     plan.chunks(g.batch).into_par_iter().for_each_init(
         || scratch_for(&plan, g.c_in, g.c_out),
-        |scratch, chunk| {
-            let scratch: &mut ForwardScratch<T> = scratch;
-            #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: the CPU has AVX2 (checked above).
-                return unsafe { forward_chunk_avx2::<T, W, M, N>(&pass, scratch, chunk) };
-            }
-            forward_chunk::<T, W, M, N>(&pass, scratch, chunk)
-        },
+        |scratch, chunk| forward_chunk_in::<T, W, M, N>(build, &pass, scratch, chunk),
     );
+    recycle(u);
     // SAFETY: the chunks cover every row of tiles of every batch item, and a chunk writes every
     // output row under its tiles.
     unsafe { y.set_len(g.batch * g.c_out * out_vox) };

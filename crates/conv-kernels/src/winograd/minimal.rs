@@ -1,10 +1,11 @@
 //! Winograd's 1D transforms F(2, 3) and F(4, 3), and the weights' transform built from them.
 
+use std::marker::PhantomData;
 use std::ops::Range;
 
 use rayon::prelude::*;
 
-use super::rows::map_rows;
+use super::rows::{map_rows_with, Arith, Map};
 use crate::element::Element;
 use crate::geometry::Geometry;
 use crate::output::{unwritten, SharedMut};
@@ -12,34 +13,76 @@ use crate::scratch::{at_least, Pooled};
 
 /// Winograd's F(M, 3) along one axis: `M` outputs of a 3-tap correlation from `N = M + 2`
 /// inputs with `N` products. The transforms are the matrices `B^T`, `A^T`, `G` of Lavin and
-/// Gray (2016) and the adjoints the weight gradient needs.
+/// Gray (2016) and the adjoints the weight gradient needs; the first three apply to values or
+/// to vectors of them ([`Arith`]), the same operations in the same order either way.
 pub(super) trait Minimal<const M: usize, const N: usize> {
     /// `B^T d`: a tile of inputs to its transformed values.
-    fn input<T: Element>(d: [T; N]) -> [T; N];
+    fn input<A: Arith>(d: [A; N]) -> [A; N];
     /// `A^T m`: the products to the outputs.
-    fn output<T: Element>(m: [T; N]) -> [T; M];
+    fn output<A: Arith>(m: [A; N]) -> [A; M];
     /// `A y`: output gradients to the products' gradients.
-    fn output_adjoint<T: Element>(y: [T; M]) -> [T; N];
+    fn output_adjoint<A: Arith>(y: [A; M]) -> [A; N];
     /// `G g`: 3 taps to `N` transformed weights.
     fn weight(g: [f64; 3]) -> [f64; N];
     /// `G^T u`: transformed weights' gradients back to the 3 taps.
     fn weight_adjoint(u: [f64; N]) -> [f64; 3];
 }
 
+/// `B^T` of `W`, F(M, 3), as a row map.
+pub(super) struct Input<W, const M: usize, const N: usize>(PhantomData<W>);
+/// `A^T` of `W`, F(M, 3), as a row map.
+pub(super) struct Output<W, const M: usize, const N: usize>(PhantomData<W>);
+/// `A` of `W`, F(M, 3), as a row map.
+pub(super) struct OutputAdjoint<W, const M: usize, const N: usize>(PhantomData<W>);
+
+/// Clone and Copy by hand: a derive would ask `W: Copy`.
+macro_rules! transform_map {
+    ($name:ident, $method:ident, $i:ident -> $o:ident) => {
+        impl<W, const M: usize, const N: usize> Clone for $name<W, M, N> {
+            fn clone(&self) -> Self {
+                *self
+            }
+        }
+
+        impl<W, const M: usize, const N: usize> Copy for $name<W, M, N> {}
+
+        impl<W, const M: usize, const N: usize> $name<W, M, N> {
+            /// The map of `W`.
+            pub(super) fn of() -> Self {
+                Self(PhantomData)
+            }
+        }
+
+        impl<W: Minimal<M, N>, const M: usize, const N: usize> Map<$i, $o> for $name<W, M, N> {
+            #[inline(always)]
+            fn apply<A: Arith>(self, values: [A; $i]) -> [A; $o] {
+                W::$method(values)
+            }
+        }
+    };
+}
+
+transform_map!(Input, input, N -> N);
+transform_map!(Output, output, N -> M);
+transform_map!(OutputAdjoint, output_adjoint, M -> N);
+
 /// F(2, 3), on the points 0, 1, -1 and infinity.
 pub(super) struct F2;
 
 impl Minimal<2, 4> for F2 {
-    fn input<T: Element>(d: [T; 4]) -> [T; 4] {
+    #[inline(always)]
+    fn input<A: Arith>(d: [A; 4]) -> [A; 4] {
         [d[0] - d[2], d[1] + d[2], d[2] - d[1], d[1] - d[3]]
     }
 
-    fn output<T: Element>(m: [T; 4]) -> [T; 2] {
+    #[inline(always)]
+    fn output<A: Arith>(m: [A; 4]) -> [A; 2] {
         [m[0] + m[1] + m[2], m[1] - m[2] - m[3]]
     }
 
-    fn output_adjoint<T: Element>(y: [T; 2]) -> [T; 4] {
-        [y[0], y[0] + y[1], y[0] - y[1], T::ZERO - y[1]]
+    #[inline(always)]
+    fn output_adjoint<A: Arith>(y: [A; 2]) -> [A; 4] {
+        [y[0], y[0] + y[1], y[0] - y[1], y[1].zero() - y[1]]
     }
 
     fn weight(g: [f64; 3]) -> [f64; 4] {
@@ -64,37 +107,37 @@ impl Minimal<2, 4> for F2 {
 pub(super) struct F4;
 
 impl Minimal<4, 6> for F4 {
-    fn input<T: Element>(d: [T; 6]) -> [T; 6] {
-        let (two, four, five) = (T::from_f64(2.0), T::from_f64(4.0), T::from_f64(5.0));
+    #[inline(always)]
+    fn input<A: Arith>(d: [A; 6]) -> [A; 6] {
         let (s12, d12) = (d[1] + d[2], d[1] - d[2]);
         let (s34, d34) = (d[4] + d[3], d[4] - d[3]);
         let (d42, d31) = (d[4] - d[2], d[3] - d[1]);
         [
-            four * d[0] - five * d[2] + d[4],
-            s34 - four * s12,
-            d34 + four * d12,
-            d42 + two * d31,
-            d42 - two * d31,
-            four * d[1] - five * d[3] + d[5],
+            d[0].times(4.0) - d[2].times(5.0) + d[4],
+            s34 - s12.times(4.0),
+            d34 + d12.times(4.0),
+            d42 + d31.times(2.0),
+            d42 - d31.times(2.0),
+            d[1].times(4.0) - d[3].times(5.0) + d[5],
         ]
     }
 
-    fn output<T: Element>(m: [T; 6]) -> [T; 4] {
-        let (two, four, eight) = (T::from_f64(2.0), T::from_f64(4.0), T::from_f64(8.0));
+    #[inline(always)]
+    fn output<A: Arith>(m: [A; 6]) -> [A; 4] {
         let (s12, d12) = (m[1] + m[2], m[1] - m[2]);
         let (s34, d34) = (m[3] + m[4], m[3] - m[4]);
         [
             m[0] + s12 + s34,
-            d12 + two * d34,
-            s12 + four * s34,
-            d12 + eight * d34 + m[5],
+            d12 + d34.times(2.0),
+            s12 + s34.times(4.0),
+            d12 + d34.times(8.0) + m[5],
         ]
     }
 
-    fn output_adjoint<T: Element>(y: [T; 4]) -> [T; 6] {
-        let (two, four, eight) = (T::from_f64(2.0), T::from_f64(4.0), T::from_f64(8.0));
+    #[inline(always)]
+    fn output_adjoint<A: Arith>(y: [A; 4]) -> [A; 6] {
         let (even1, odd1) = (y[0] + y[2], y[1] + y[3]);
-        let (even2, odd2) = (y[0] + four * y[2], two * y[1] + eight * y[3]);
+        let (even2, odd2) = (y[0] + y[2].times(4.0), y[1].times(2.0) + y[3].times(8.0));
         [
             y[0],
             even1 + odd1,
@@ -148,11 +191,12 @@ fn along_axis<const I: usize, const O: usize>(
         for j in 0..shape[b] {
             let base = i * strides[a] + j * strides[b];
             let out_base = i * out_strides[a] + j * out_strides[b];
-            map_rows(
-                src,
-                std::array::from_fn(|t| base + t * strides[axis]),
-                dst,
-                std::array::from_fn(|t| out_base + t * out_strides[axis]),
+            map_rows_with(
+                (src, std::array::from_fn(|t| base + t * strides[axis])),
+                (
+                    dst,
+                    std::array::from_fn(|t| out_base + t * out_strides[axis]),
+                ),
                 width,
                 &map,
             );

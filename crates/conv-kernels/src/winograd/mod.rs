@@ -31,8 +31,11 @@
 use crate::element::Element;
 use crate::geometry::{assert_valid, Geometry};
 use crate::im2col;
+use crate::isa::Isa;
 use crate::scratch::{at_least, Pooled};
 
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 mod forward;
 mod minimal;
 mod products;
@@ -63,13 +66,41 @@ const CHUNK_TARGET_ELEMS: usize = 1 << 21;
 /// 0.204-0.223 at 2^19, 0.260 at 2^18; 28^3 and the 54^2 critic 2-6% faster at 2^19.
 const CHUNK_TARGET_ELEMS_OWN_PRODUCTS: usize = 1 << 19;
 
-/// The chunk target of this CPU: the chunks, and so the weight gradient's partial sums, depend
-/// on the instruction set as the products' roundings do, never on the thread count.
-fn chunk_target() -> usize {
-    if products::own_kernels() {
+/// The chunk target of a pass on `isa`: the chunks, and so the weight gradient's partial sums,
+/// depend on the instruction set as the products' roundings do, never on the thread count.
+fn chunk_target(isa: Isa) -> usize {
+    if products::own_kernels(isa) {
         CHUNK_TARGET_ELEMS_OWN_PRODUCTS
     } else {
         CHUNK_TARGET_ELEMS
+    }
+}
+
+/// The build a pass's chunks run in, from the pass's instruction set: the transforms in
+/// baseline blocks, in AVX2 blocks, or in the 16-lane AVX-512 row kernels (the rest of the
+/// chunk in the AVX2 build).
+#[derive(Debug, Clone, Copy)]
+enum Build {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512(avx512::Avx512),
+}
+
+impl Build {
+    /// The build of `isa`: AVX2 only where the CPU has AVX2 and FMA (an [`Isa`] is never above
+    /// the CPU's), AVX-512 only where it has AVX-512 F too.
+    fn of(isa: Isa) -> Self {
+        match isa {
+            Isa::Portable => Build::Portable,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => Build::Avx2,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => avx512::Avx512::new().map_or(Build::Avx2, Build::Avx512),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => Build::Portable,
+        }
     }
 }
 
@@ -149,8 +180,9 @@ struct Plan {
 }
 
 impl Plan {
-    /// The tiling of `g` with `m` outputs per tile along its 3-tap axes (F(m, 3)).
-    fn new(g: &Geometry, m: usize) -> Self {
+    /// The tiling of `g` with `m` outputs per tile along its 3-tap axes (F(m, 3)), for a pass on
+    /// `isa`.
+    fn new(g: &Geometry, m: usize, isa: Isa) -> Self {
         let out = g.output();
         let axes = [0, 1, 2].map(|a| {
             let taps = g.kernel[a];
@@ -168,7 +200,7 @@ impl Plan {
         let positions: usize = axes.iter().map(|a| a.ins).product();
         let per_row = positions * (g.c_in + g.c_out) * (axes[2].tiles + 1);
         let rows = axes[0].tiles * axes[1].tiles;
-        let most = (chunk_target() / per_row).clamp(1, rows);
+        let most = (chunk_target(isa) / per_row).clamp(1, rows);
         // An even number of chunks of nearly equal rows (sizes at most one row apart), so
         // that two threads get equal shares: 28^3's 49 rows in chunks of 9 left the last
         // chunk 4 rows and one thread 27 rows against 22. Fixed by the geometry alone, not the

@@ -21,20 +21,22 @@
 use gemm::Parallelism;
 
 use crate::element::Element;
+use crate::isa::Isa;
 
 /// `m (rows x ld) = u (rows x inner) * v (inner x ld)`, all row-major, `m` and `v` with rows
-/// `ld` apart and `u` with rows `inner` apart. `ld` is a multiple of 8.
+/// `ld` apart and `u` with rows `inner` apart, on the kernel of `isa`. `ld` is a multiple of 8.
 ///
 /// # Safety
-/// The pointers must cover the matrices their sizes imply.
+/// The pointers must cover the matrices their sizes imply, and `isa` must be one this CPU runs.
 pub(super) unsafe fn forward_product<T: Element>(
+    isa: Isa,
     (rows, inner, ld): (usize, usize, usize),
     m: *mut T,
     u: *const T,
     v: *const T,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if T::IS_F32 && ld % 8 == 0 && own_kernels() {
+    if T::IS_F32 && ld % 8 == 0 && own_kernels(isa) {
         let product = avx2::Product {
             shape: (rows, inner, ld),
             m: (m.cast(), ld),
@@ -60,11 +62,12 @@ pub(super) unsafe fn forward_product<T: Element>(
 
 /// `du (rows x inner) = z (rows x cols) * v (inner x cols)^T`, or `+=` with `accumulate`; `du`
 /// row-major with rows `inner` apart, `z` and `v` with rows `ld` apart (only their first `cols`
-/// columns are read). `transposed` is scratch for `v^T`.
+/// columns are read), on the kernel of `isa`. `transposed` is scratch for `v^T`.
 ///
 /// # Safety
-/// The pointers must cover the matrices their sizes imply.
+/// The pointers must cover the matrices their sizes imply, and `isa` must be one this CPU runs.
 pub(super) unsafe fn weight_product<T: Element>(
+    isa: Isa,
     (rows, inner, cols, ld): (usize, usize, usize, usize),
     (du, accumulate): (*mut T, bool),
     z: *const T,
@@ -72,7 +75,7 @@ pub(super) unsafe fn weight_product<T: Element>(
     transposed: &mut Vec<T>,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if T::IS_F32 && inner % 8 == 0 && own_kernels() {
+    if T::IS_F32 && inner % 8 == 0 && own_kernels(isa) {
         crate::scratch::at_least(transposed, cols * inner);
         let vt: *mut f32 = transposed.as_mut_ptr().cast();
         let product = avx2::Product {
@@ -141,21 +144,11 @@ unsafe fn matmul<T: Element>(
     }
 }
 
-/// Whether this CPU runs the f32 kernels of this module: AVX2 and FMA (the two flags are
-/// separate), and no AVX-512, where `gemm`'s 16-lane kernels are the faster ones.
-pub(super) fn own_kernels() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::sync::OnceLock;
-        static OWN: OnceLock<bool> = OnceLock::new();
-        *OWN.get_or_init(|| {
-            crate::simd::has_avx2()
-                && std::is_x86_feature_detected!("fma")
-                && !std::is_x86_feature_detected!("avx512f")
-        })
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+/// Whether a pass on `isa` runs the f32 kernels of this module: on AVX2 and FMA without
+/// AVX-512, where `gemm`'s 16-lane kernels are the faster ones (measured:
+/// docs/journal/2026-11-performance-patch-gan.md, 2026-12-02).
+pub(super) fn own_kernels(isa: Isa) -> bool {
+    cfg!(target_arch = "x86_64") && isa == Isa::Avx2
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -318,8 +311,7 @@ mod avx2 {
     /// 128-bit halves.
     ///
     /// # Safety
-    /// The CPU must have AVX2 and FMA. (An `unsafe fn`, whose body may call the intrinsics on
-    /// Rust 1.85, the workspace's oldest: safe functions with target features need 1.86.)
+    /// The CPU must have AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     unsafe fn transpose_8x8(r: [__m256; LANES]) -> [__m256; LANES] {
@@ -370,10 +362,17 @@ mod tests {
 
     /// Every block shape the kernel has (2 x 6 vectors, 4 x 2 and 4 x 1 at the last columns,
     /// single rows below them) against the sums in f64: rows 1 to 9, `ld` from 8 to 96 (every
-    /// remainder of 48), inner sizes 1, 4 and 33. f32 products of values below 1 summed in f32 are
-    /// within `inner` ulps of 1 of the exact sum.
+    /// remainder of 48), inner sizes 1, 4 and 33; on every instruction set this CPU runs (the
+    /// AVX2 one is our kernel, the others `gemm`'s). f32 products of values below 1 summed in
+    /// f32 are within `inner` ulps of 1 of the exact sum.
     #[test]
     fn products_match_sums_in_f64() {
+        for isa in crate::isa::available() {
+            products_match_sums_in_f64_on(isa);
+        }
+    }
+
+    fn products_match_sums_in_f64_on(isa: Isa) {
         for rows in [1, 3, 4, 5, 9] {
             for inner in [1, 4, 33] {
                 for ld in [8, 16, 24, 32, 40, 48, 56, 64, 80, 96] {
@@ -381,10 +380,10 @@ mod tests {
                     let v = values(inner * ld, 2);
                     // A stale value in `m`: the product must overwrite it.
                     let mut m = vec![f32::NAN; rows * ld];
-                    // SAFETY: the vectors have exactly the sizes the shape implies.
-                    unsafe {
-                        forward_product((rows, inner, ld), m.as_mut_ptr(), u.as_ptr(), v.as_ptr())
-                    };
+                    let (mp, up, vp) = (m.as_mut_ptr(), u.as_ptr(), v.as_ptr());
+                    // SAFETY: the vectors have exactly the sizes the shape implies; the CPU
+                    // runs `isa`.
+                    unsafe { forward_product(isa, (rows, inner, ld), mp, up, vp) };
                     for r in 0..rows {
                         for c in 0..ld {
                             let exact: f64 = (0..inner)
@@ -394,7 +393,7 @@ mod tests {
                             let bound = inner as f64 * f64::from(f32::EPSILON);
                             assert!(
                                 (got - exact).abs() <= bound,
-                                "{rows}x{inner} by {inner}x{ld}: ({r}, {c}) {got} vs {exact}"
+                                "{isa:?} {rows}x{inner} by {inner}x{ld}: ({r}, {c}) {got} vs {exact}"
                             );
                         }
                     }
@@ -405,9 +404,16 @@ mod tests {
 
     /// The weight gradient's products (`V^T` by whole 8 x 8 blocks and single columns, then
     /// the blocks of the forward kernel, writing and adding) against the sums in f64, with NaN
-    /// in the columns between `cols` and `ld`, which must not be read. `inner` 4 takes `gemm`.
+    /// in the columns between `cols` and `ld`, which must not be read. `inner` 4 takes `gemm`;
+    /// every instruction set this CPU runs.
     #[test]
     fn weight_products_match_sums_in_f64() {
+        for isa in crate::isa::available() {
+            weight_products_match_sums_in_f64_on(isa);
+        }
+    }
+
+    fn weight_products_match_sums_in_f64_on(isa: Isa) {
         for rows in [1, 4, 5, 32] {
             for inner in [4, 8, 16, 40] {
                 for cols in [1usize, 7, 8, 13, 50] {
@@ -429,9 +435,11 @@ mod tests {
                             vec![f32::NAN; rows * inner]
                         };
                         let mut transposed = Vec::new();
-                        // SAFETY: `z` and `v` have at least `rows` and `inner` rows of `ld`.
+                        // SAFETY: `z` and `v` have at least `rows` and `inner` rows of `ld`; the
+                        // CPU runs `isa`.
                         unsafe {
                             weight_product(
+                                isa,
                                 (rows, inner, cols, ld),
                                 (du.as_mut_ptr(), accumulate),
                                 z.as_ptr(),
@@ -456,7 +464,7 @@ mod tests {
                                 let bound = (cols + 1) as f64 * f64::from(f32::EPSILON);
                                 assert!(
                                     (got - exact).abs() <= bound,
-                                    "{rows}x{cols} by ({inner}x{cols})^T, accumulate {accumulate}: \
+                                    "{isa:?} {rows}x{cols} by ({inner}x{cols})^T, accumulate {accumulate}: \
                                      ({r}, {c}) {got} vs {exact}"
                                 );
                             }

@@ -1,18 +1,115 @@
-//! Row-wise work of the Winograd kernel: element-wise maps over rows in fixed-size blocks (the
-//! transforms along D and H over whole rows, and along W over a chunk's tiles), and the split of
-//! rows into phases and back.
+//! Row-wise work of the Winograd kernel: element-wise maps over rows (the transforms along D
+//! and H over whole rows, and along W over a chunk's tiles), and the split of rows into phases
+//! and back, each in two builds ([`RowKernels`]): fixed-size blocks that the compiler
+//! vectorises for whatever instruction set its caller is compiled for (baseline or AVX2), and
+//! 16-lane AVX-512 kernels (`avx512`). Both compute the same operations in the same order, so
+//! they give the same bits.
+
+use std::ops::{Add, Sub};
 
 use super::RowBuffers;
 use crate::element::Element;
+
+/// What the transforms compute with: a value, or (in the 16-lane build) a vector of them.
+/// The transforms need sums, differences, products with small constants and zeros only.
+pub(super) trait Arith: Copy + Add<Output = Self> + Sub<Output = Self> {
+    /// `self` times `k` (rounded to the lane type, as `T::from_f64(k)`).
+    fn times(self, k: f64) -> Self;
+    /// A zero of this type.
+    fn zero(self) -> Self;
+}
+
+impl<T: Element> Arith for T {
+    #[inline(always)]
+    fn times(self, k: f64) -> Self {
+        self * T::from_f64(k)
+    }
+
+    #[inline(always)]
+    fn zero(self) -> Self {
+        T::ZERO
+    }
+}
+
+/// An `I`-to-`O` map applied element by element (lane by lane) to rows: one of Winograd's 1D
+/// transforms. A type rather than a closure, so that each build applies it to its own lanes.
+pub(super) trait Map<const I: usize, const O: usize>: Copy {
+    /// The map of one tuple of values.
+    fn apply<A: Arith>(self, values: [A; I]) -> [A; O];
+}
+
+/// The row kernels of one build. The kernels take slices and check their bounds; a build is
+/// a value, so that the 16-lane one can only exist where the CPU runs it (see `avx512`).
+pub(super) trait RowKernels: Copy {
+    /// `dst[dst_at[k] + i]` gets component `k` of `map` applied to `(srcs[0][i], srcs[1][i],
+    /// ...)` for every `i < len`. The ranges `dst_at[k]..dst_at[k] + len` must lie in `dst` and
+    /// not overlap.
+    fn map_into<T: Element, const I: usize, const O: usize>(
+        self,
+        srcs: [&[T]; I],
+        dst: &mut [T],
+        dst_at: [usize; O],
+        len: usize,
+        map: impl Map<I, O>,
+    );
+
+    /// Splits the row `zeros(padding) ++ src ++ zeros` into `M` phases of `count` values, phase
+    /// `p` at `dst[p stride..]`: `dst[p stride + k]` is the padded row's voxel `M k + p` (zero
+    /// past either end).
+    fn deinterleave<T: Element, const M: usize>(
+        self,
+        dst: &mut [T],
+        stride_count: (usize, usize),
+        src: &[T],
+        padding: usize,
+    );
+
+    /// The inverse of [`RowKernels::deinterleave`] without padding: `dst[x]` is
+    /// `phases[(x % M) stride + x / M]`.
+    fn interleave<T: Element, const M: usize>(self, dst: &mut [T], phases: &[T], stride: usize);
+}
+
+/// The build of fixed-size blocks, vectorised as the caller's instruction set allows.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Blocks;
+
+impl RowKernels for Blocks {
+    #[inline(always)]
+    fn map_into<T: Element, const I: usize, const O: usize>(
+        self,
+        srcs: [&[T]; I],
+        dst: &mut [T],
+        dst_at: [usize; O],
+        len: usize,
+        map: impl Map<I, O>,
+    ) {
+        map_into(srcs, dst, dst_at, len, |v| map.apply(v))
+    }
+
+    #[inline(always)]
+    fn deinterleave<T: Element, const M: usize>(
+        self,
+        dst: &mut [T],
+        stride_count: (usize, usize),
+        src: &[T],
+        padding: usize,
+    ) {
+        deinterleave::<T, M>(dst, stride_count, src, padding)
+    }
+
+    #[inline(always)]
+    fn interleave<T: Element, const M: usize>(self, dst: &mut [T], phases: &[T], stride: usize) {
+        interleave::<T, M>(dst, phases, stride)
+    }
+}
 
 /// Values a [`map_into`] step handles at once: fixed-size blocks are what the compiler turns
 /// into vector instructions (a plain loop over the rows kept a bounds check per element).
 const LANES: usize = 8;
 
-/// `dst[dst_at[k] + i]` gets component `k` of `map` applied to `(srcs[0][i], srcs[1][i], ...)`
-/// for every `i < len`. The ranges `dst_at[k]..dst_at[k] + len` must lie in `dst` and not overlap.
+/// [`RowKernels::map_into`] of [`Blocks`], for any function of the values.
 #[inline(always)]
-pub(super) fn map_into<T: Element, const I: usize, const O: usize>(
+fn map_into<T: Element, const I: usize, const O: usize>(
     srcs: [&[T]; I],
     dst: &mut [T],
     dst_at: [usize; O],
@@ -65,11 +162,22 @@ fn map_blocks<T: Element, const I: usize, const O: usize, const B: usize>(
 /// `dst` row `dst_rows[k]` (each `width` long) gets component `k` of `map` applied, element by
 /// element, to the rows `src_rows` of `src`.
 #[inline(always)]
-pub(super) fn map_rows<T: Element, const I: usize, const O: usize>(
-    src: &[T],
-    src_rows: [usize; I],
-    dst: &mut [T],
-    dst_rows: [usize; O],
+fn map_rows<T: Element, const I: usize, const O: usize>(
+    kernels: impl RowKernels,
+    (src, src_rows): (&[T], [usize; I]),
+    (dst, dst_rows): (&mut [T], [usize; O]),
+    width: usize,
+    map: impl Map<I, O>,
+) {
+    let srcs = src_rows.map(|r| &src[r * width..][..width]);
+    kernels.map_into(srcs, dst, dst_rows.map(|r| r * width), width, map)
+}
+
+/// [`map_rows`] of any function of the values, in [`Blocks`]: the weights' transforms in f64.
+#[inline(always)]
+pub(super) fn map_rows_with<T: Element, const I: usize, const O: usize>(
+    (src, src_rows): (&[T], [usize; I]),
+    (dst, dst_rows): (&mut [T], [usize; O]),
     width: usize,
     map: impl Fn([T; I]) -> [T; O],
 ) {
@@ -82,20 +190,19 @@ pub(super) fn map_rows<T: Element, const I: usize, const O: usize>(
 /// shape, whose rows are in `bufs.a` again.
 #[inline(always)]
 pub(super) fn map_d_then_h<T: Element, const I: usize, const O: usize>(
+    kernels: impl RowKernels,
     bufs: &mut RowBuffers<T>,
-    dims: (usize, usize),
-    taps: (usize, usize),
+    (dims, taps): ((usize, usize), (usize, usize)),
     width: usize,
-    map: impl Fn([T; I]) -> [T; O] + Copy,
+    map: impl Map<I, O>,
 ) -> (usize, usize) {
     let (mut d, h) = dims;
     if taps.0 == 3 {
         for b in 0..h {
             map_rows(
-                &bufs.a,
-                std::array::from_fn(|k| k * h + b),
-                &mut bufs.b,
-                std::array::from_fn(|k| k * h + b),
+                kernels,
+                (&bufs.a, std::array::from_fn(|k| k * h + b)),
+                (&mut bufs.b, std::array::from_fn(|k| k * h + b)),
                 width,
                 map,
             );
@@ -107,10 +214,9 @@ pub(super) fn map_d_then_h<T: Element, const I: usize, const O: usize>(
     if taps.1 == 3 {
         for a in 0..d {
             map_rows(
-                &bufs.a,
-                std::array::from_fn(|k| a * h + k),
-                &mut bufs.b,
-                std::array::from_fn(|k| a * O + k),
+                kernels,
+                (&bufs.a, std::array::from_fn(|k| a * h + k)),
+                (&mut bufs.b, std::array::from_fn(|k| a * O + k)),
                 width,
                 map,
             );
@@ -126,11 +232,9 @@ pub(super) fn map_d_then_h<T: Element, const I: usize, const O: usize>(
 /// a loop with `j % M` and `j / M` per voxel was a fifth of the forward pass's time.
 const SHUFFLE_TILES: usize = 8;
 
-/// Splits the row `zeros(padding) ++ src ++ zeros` into `M` phases of `count` values, phase `p`
-/// at `dst[p stride..]`: `dst[p stride + k]` is the padded row's voxel `M k + p` (zero past
-/// either end).
+/// [`RowKernels::deinterleave`] of [`Blocks`].
 #[inline(always)]
-pub(super) fn deinterleave<T: Element, const M: usize>(
+fn deinterleave<T: Element, const M: usize>(
     dst: &mut [T],
     (stride, count): (usize, usize),
     src: &[T],
@@ -179,9 +283,9 @@ fn deinterleave_block<T: Element, const M: usize, const B: usize>(
     B
 }
 
-/// The inverse of [`deinterleave`] without padding: `dst[x]` is `phases[(x % M) stride + x / M]`.
+/// [`RowKernels::interleave`] of [`Blocks`].
 #[inline(always)]
-pub(super) fn interleave<T: Element, const M: usize>(dst: &mut [T], phases: &[T], stride: usize) {
+fn interleave<T: Element, const M: usize>(dst: &mut [T], phases: &[T], stride: usize) {
     let mut t = 0;
     while M * t < dst.len() {
         let left = dst.len() - M * t;

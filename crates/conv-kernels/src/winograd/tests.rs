@@ -1,6 +1,7 @@
 //! The Winograd passes against the im2col kernel, in f64 and in f32.
 
 use super::*;
+use crate::isa::{available, with_isa};
 
 /// Deterministic values in [-1, 1).
 pub(super) fn values(n: usize, seed: u64) -> Vec<f64> {
@@ -94,11 +95,15 @@ fn assert_passes_match_im2col(g: &Geometry, tile: Tile, seed: u64) {
 
 #[test]
 fn all_three_passes_match_the_im2col_kernel_in_f64() {
-    for tile in [Tile::F2, Tile::F4] {
-        for (i, g) in geometries().into_iter().enumerate() {
-            assert!(supports(&g), "{g:?}");
-            assert_passes_match_im2col(&g, tile, i as u64);
-        }
+    for isa in available() {
+        with_isa(isa, || {
+            for tile in [Tile::F2, Tile::F4] {
+                for (i, g) in geometries().into_iter().enumerate() {
+                    assert!(supports(&g), "{g:?}");
+                    assert_passes_match_im2col(&g, tile, i as u64);
+                }
+            }
+        });
     }
 }
 
@@ -111,15 +116,17 @@ fn passes_split_into_several_chunks_match_im2col() {
         input: [62, 61, 37],
         ..geometries()[0]
     };
-    let plan = Plan::new(&g, 4);
-    let rows: Vec<usize> = plan.chunks(1).iter().map(|&(_, _, rows)| rows).collect();
-    let expected = if chunk_target() == CHUNK_TARGET_ELEMS {
-        vec![64; 4]
-    } else {
-        (0..10).map(|i| (i + 1) * 256 / 10 - i * 256 / 10).collect()
-    };
-    assert_eq!(rows, expected, "{plan:?}");
-    assert_passes_match_im2col(&g, Tile::F4, 14);
+    for isa in available() {
+        let plan = Plan::new(&g, 4, isa);
+        let rows: Vec<usize> = plan.chunks(1).iter().map(|&(_, _, rows)| rows).collect();
+        let expected = if chunk_target(isa) == CHUNK_TARGET_ELEMS {
+            vec![64; 4]
+        } else {
+            (0..10).map(|i| (i + 1) * 256 / 10 - i * 256 / 10).collect()
+        };
+        assert_eq!(rows, expected, "{isa:?} {plan:?}");
+        with_isa(isa, || assert_passes_match_im2col(&g, Tile::F4, 14));
+    }
 }
 
 #[test]
@@ -130,7 +137,7 @@ fn weight_gradient_blocks_of_several_chunks_match_im2col() {
         batch: WEIGHT_GRAD_BLOCKS + 1,
         ..geometries()[0]
     };
-    let plan = Plan::new(&g, 2);
+    let plan = Plan::new(&g, 2, Isa::current());
     assert_eq!(plan.chunks(1).len(), 1, "{plan:?}");
     assert_passes_match_im2col(&g, Tile::F2, 15);
 }
@@ -159,8 +166,16 @@ fn the_public_passes_pick_f4_from_eight_outputs_and_match_im2col() {
     }
 }
 
+/// The f32 passes on every instruction set this CPU runs against sums in f64 (the im2col kernel
+/// in f64), within a stated factor of the f32 im2col kernel's own error.
 #[test]
 fn f32_rounding_stays_near_the_direct_sums_level() {
+    for isa in available() {
+        with_isa(isa, f32_rounding_on);
+    }
+}
+
+fn f32_rounding_on() {
     let g = Geometry {
         batch: 1,
         c_in: 32,
@@ -197,7 +212,8 @@ fn f32_rounding_stays_near_the_direct_sums_level() {
             let direct_err = max_rel_diff(&widen(&direct[pass]), &exact[pass]);
             assert!(
                 ours_err < factor * direct_err.max(1e-7),
-                "{tile:?} pass {pass}: {ours_err} vs im2col {direct_err}"
+                "{:?} {tile:?} pass {pass}: {ours_err} vs im2col {direct_err}",
+                Isa::current()
             );
         }
     }
@@ -220,4 +236,41 @@ fn unsupported_geometries_are_left_to_im2col() {
         padding: [3, 1, 1],
         ..base
     }));
+}
+
+/// The 16-lane transforms compute what the portable ones do, in the same order: with the same
+/// products (`gemm`'s, which both take) and chunks, the f32 passes give the same bits, on
+/// rows with padding, short rows and several chunks. Skipped on a CPU without AVX-512.
+#[test]
+fn the_avx512_transforms_give_the_portable_bits() {
+    if Isa::detected() < Isa::Avx512 {
+        return;
+    }
+    let as_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect::<Vec<f32>>();
+    let mut cases = geometries();
+    cases.push(Geometry {
+        c_in: 16,
+        c_out: 8,
+        input: [30, 29, 37],
+        ..geometries()[0]
+    });
+    for (i, g) in cases.iter().enumerate() {
+        let in_len = g.batch * g.c_in * g.input.iter().product::<usize>();
+        let out_len = g.batch * g.c_out * g.output().iter().product::<usize>();
+        let x = as_f32(values(in_len, 40 + i as u64));
+        let w = as_f32(values(g.kernel_len(), 60 + i as u64));
+        let go = as_f32(values(out_len, 80 + i as u64));
+        for tile in [Tile::F2, Tile::F4] {
+            let wide = with_isa(Isa::Avx512, || passes(&x, &w, &go, g, tile));
+            let portable = with_isa(Isa::Portable, || passes(&x, &w, &go, g, tile));
+            for pass in 0..3 {
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&wide[pass]),
+                    bits(&portable[pass]),
+                    "{tile:?} {g:?} pass {pass}"
+                );
+            }
+        }
+    }
 }

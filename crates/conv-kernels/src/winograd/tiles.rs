@@ -1,8 +1,8 @@
 //! The transforms of a chunk's tiles: input tiles by `B^T`, products back by `A^T`, output
 //! gradients expanded by `A`, each over whole rows of the chunk's tiles.
 
-use super::minimal::Minimal;
-use super::rows::{deinterleave, map_d_then_h, map_into};
+use super::minimal::{Input, Minimal, Output, OutputAdjoint};
+use super::rows::{map_d_then_h, RowKernels};
 use super::{matrix_stride, Plan, RowBuffers};
 use crate::element::Element;
 use crate::geometry::Geometry;
@@ -18,6 +18,7 @@ pub(super) fn fill_transformed_inputs<
     const M: usize,
     const N: usize,
 >(
+    kernels: impl RowKernels,
     v: &mut [T],
     bufs: &mut RowBuffers<T>,
     x_n: &[T],
@@ -41,14 +42,15 @@ pub(super) fn fill_transformed_inputs<
                     // Wrapped (negative) indices are huge, so one comparison covers both sides.
                     if z < ad.input && y < ah.input {
                         let src = &x_c[(z * ah.input + y) * aw.input..][..aw.input];
-                        deinterleave::<T, M>(dst, (cols, half), src, aw.padding);
+                        kernels.deinterleave::<T, M>(dst, (cols, half), src, aw.padding);
                     } else {
                         (0..M).for_each(|p| dst[p * cols..][..half].fill(T::ZERO));
                     }
                 }
             }
         }
-        let (nd, nh) = map_d_then_h(bufs, (ad.ins, ah.ins), (ad.taps, ah.taps), width, W::input);
+        let dims = ((ad.ins, ah.ins), (ad.taps, ah.taps));
+        let (nd, nh) = map_d_then_h(kernels, bufs, dims, width, Input::<W, M, N>::of());
         // Read past the last row by F(2, 3)'s unused column: a stale value there could be a
         // non-finite one, which the weight gradient's zero output gradients would not cancel.
         bufs.a[nd * nh * width] = T::ZERO;
@@ -57,7 +59,7 @@ pub(super) fn fill_transformed_inputs<
             // Input i of tile t is the padded row's voxel M t + i: phase i % M, index t + i / M.
             let srcs = std::array::from_fn(|i| &phases[(i % M) * cols + i / M..]);
             let at = std::array::from_fn(|xi| ((row * N + xi) * g.c_in + c) * ld);
-            map_into(srcs, v, at, cols, W::input);
+            kernels.map_into(srcs, v, at, cols, Input::<W, M, N>::of());
         }
     }
 }
@@ -67,6 +69,7 @@ pub(super) fn fill_transformed_inputs<
 /// `bufs.a`, is `outs_d x outs_h` rows of `M` phases of `cols` values.
 #[inline(always)]
 pub(super) fn transform_outputs<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     bufs: &mut RowBuffers<T>,
     m: &[T],
     (c, c_out): (usize, usize),
@@ -78,9 +81,10 @@ pub(super) fn transform_outputs<T: Element, W: Minimal<M, N>, const M: usize, co
     for row in 0..ad.ins * ah.ins {
         let srcs = std::array::from_fn(|xi| &m[((row * N + xi) * c_out + c) * ld..]);
         let at = std::array::from_fn(|p| row * width + p * cols);
-        map_into(srcs, &mut bufs.a, at, cols, W::output);
+        kernels.map_into(srcs, &mut bufs.a, at, cols, Output::<W, M, N>::of());
     }
-    map_d_then_h(bufs, (ad.ins, ah.ins), (ad.taps, ah.taps), width, W::output);
+    let dims = ((ad.ins, ah.ins), (ad.taps, ah.taps));
+    map_d_then_h(kernels, bufs, dims, width, Output::<W, M, N>::of());
 }
 
 /// The output gradient of channel `c` over a chunk's tiles expanded by `A` into `z`
@@ -88,6 +92,7 @@ pub(super) fn transform_outputs<T: Element, W: Minimal<M, N>, const M: usize, co
 /// column, in phases) expanded along D and H, then along W.
 #[inline(always)]
 pub(super) fn expand_output_grads<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     z: &mut [T],
     bufs: &mut RowBuffers<T>,
     go_c: &[T],
@@ -107,23 +112,18 @@ pub(super) fn expand_output_grads<T: Element, W: Minimal<M, N>, const M: usize, 
                 let dst = &mut bufs.a[(a * ah.outs + b) * width + r * half..];
                 if zz < out[0] && yy < out[1] {
                     let src = &go_c[(zz * out[1] + yy) * out[2]..][..out[2]];
-                    deinterleave::<T, M>(dst, (cols, half), src, 0);
+                    kernels.deinterleave::<T, M>(dst, (cols, half), src, 0);
                 } else {
                     (0..M).for_each(|p| dst[p * cols..][..half].fill(T::ZERO));
                 }
             }
         }
     }
-    let (nd, nh) = map_d_then_h(
-        bufs,
-        (ad.outs, ah.outs),
-        (ad.taps, ah.taps),
-        width,
-        W::output_adjoint,
-    );
+    let dims = ((ad.outs, ah.outs), (ad.taps, ah.taps));
+    let (nd, nh) = map_d_then_h(kernels, bufs, dims, width, OutputAdjoint::<W, M, N>::of());
     for row in 0..nd * nh {
         let srcs = std::array::from_fn(|p| &bufs.a[row * width + p * cols..]);
         let at = std::array::from_fn(|xi| ((row * N + xi) * c_out + c) * ld);
-        map_into(srcs, z, at, cols, W::output_adjoint);
+        kernels.map_into(srcs, z, at, cols, OutputAdjoint::<W, M, N>::of());
     }
 }

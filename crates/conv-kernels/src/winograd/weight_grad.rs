@@ -6,12 +6,14 @@ use rayon::prelude::*;
 
 use super::minimal::{map_pair_blocks, Minimal, F2, F4};
 use super::products::weight_product;
+use super::rows::{Blocks, RowKernels};
 use super::tiles::{expand_output_grads, fill_transformed_inputs};
-use super::{matrix_stride, scratch_for, ForwardScratch, Plan, Tile, WEIGHT_GRAD_BLOCKS};
+use super::{matrix_stride, scratch_for, Build, ForwardScratch, Plan, Tile, WEIGHT_GRAD_BLOCKS};
+use crate::buffers::recycle;
 use crate::element::Element;
 use crate::geometry::Geometry;
+use crate::isa::Isa;
 use crate::output::{unwritten, SharedMut};
-use crate::simd::has_avx2;
 
 /// What every chunk of a weight-gradient pass reads.
 struct WeightGradPass<'a, T> {
@@ -19,6 +21,7 @@ struct WeightGradPass<'a, T> {
     grad_out: &'a [T],
     g: &'a Geometry,
     plan: &'a Plan,
+    isa: Isa,
 }
 
 /// One chunk of a weight-gradient pass: transform its input tiles (into `scratch.v`) and its
@@ -27,6 +30,7 @@ struct WeightGradPass<'a, T> {
 /// C_in` values.
 #[inline(always)]
 fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     pass: &WeightGradPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
     du: &mut Vec<T>,
@@ -41,10 +45,11 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
     let cols = rows * plan.row_cols();
     let ld = matrix_stride(cols);
     let x_n = &pass.x[n * ci * in_vox..];
-    fill_transformed_inputs::<T, W, M, N>(v, bufs, x_n, g, plan, (row0, rows));
+    fill_transformed_inputs::<T, W, M, N>(kernels, v, bufs, x_n, g, plan, (row0, rows));
     for c in 0..co {
         let go_c = &pass.grad_out[(n * co + c) * out_vox..][..out_vox];
-        expand_output_grads::<T, W, M, N>(z, bufs, go_c, (c, co), (g, plan), (row0, rows));
+        let tiles = (row0, rows);
+        expand_output_grads::<T, W, M, N>(kernels, z, bufs, go_c, (c, co), (g, plan), tiles);
     }
     // The capacity, not the length: `du` is unwritten until the first chunk's products.
     // The matrix products below write through this pointer: it must have room for them all.
@@ -60,6 +65,7 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
         // are added to values an earlier chunk wrote.
         unsafe {
             weight_product(
+                pass.isa,
                 (co, ci, cols, ld),
                 (du.add(pos * co * ci), !first),
                 z[pos * co * ld..].as_ptr(),
@@ -70,20 +76,44 @@ fn weight_grad_chunk<T: Element, W: Minimal<M, N>, const M: usize, const N: usiz
     }
 }
 
-/// [`weight_grad_chunk`] compiled for AVX2.
+/// [`weight_grad_chunk`] compiled for AVX2 and FMA (see `forward_chunk_avx2`).
 ///
 /// # Safety
-/// The CPU must have AVX2.
+/// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 unsafe fn weight_grad_chunk_avx2<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    kernels: impl RowKernels,
     pass: &WeightGradPass<'_, T>,
     scratch: &mut ForwardScratch<T>,
-    du: &mut Vec<T>,
+    (du, first): (&mut Vec<T>, bool),
     chunk: (usize, usize, usize),
-    first: bool,
 ) {
-    weight_grad_chunk::<T, W, M, N>(pass, scratch, du, chunk, first)
+    weight_grad_chunk::<T, W, M, N>(kernels, pass, scratch, du, chunk, first)
+}
+
+/// [`weight_grad_chunk`] in `build`.
+#[inline(always)]
+fn weight_grad_chunk_in<T: Element, W: Minimal<M, N>, const M: usize, const N: usize>(
+    build: Build,
+    pass: &WeightGradPass<'_, T>,
+    scratch: &mut ForwardScratch<T>,
+    (du, first): (&mut Vec<T>, bool),
+    chunk: (usize, usize, usize),
+) {
+    match build {
+        Build::Portable => weight_grad_chunk::<T, W, M, N>(Blocks, pass, scratch, du, chunk, first),
+        // SAFETY: a `Build` names AVX2 only on a CPU with AVX2 and FMA (`Build::of`).
+        #[cfg(target_arch = "x86_64")]
+        Build::Avx2 => unsafe {
+            weight_grad_chunk_avx2::<T, W, M, N>(Blocks, pass, scratch, (du, first), chunk)
+        },
+        // SAFETY: as above; AVX-512 implies AVX2 and FMA here (`Isa`).
+        #[cfg(target_arch = "x86_64")]
+        Build::Avx512(wide) => unsafe {
+            weight_grad_chunk_avx2::<T, W, M, N>(wide, pass, scratch, (du, first), chunk)
+        },
+    }
 }
 
 /// [`super::grad_weight`] with the given tile.
@@ -105,7 +135,8 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
     grad_out: &[T],
     g: &Geometry,
 ) -> Vec<T> {
-    let plan = Plan::new(g, M);
+    let isa = Isa::current();
+    let plan = Plan::new(g, M, isa);
     let (p, ci, co) = (plan.positions, g.c_in, g.c_out);
     let chunks = plan.chunks(g.batch);
     let per_block = chunks.len().div_ceil(WEIGHT_GRAD_BLOCKS).max(1);
@@ -114,9 +145,9 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
         grad_out,
         g,
         plan: &plan,
+        isa,
     };
-    let avx2 = has_avx2();
-    let _ = avx2; // read by the x86-64 branch only
+    let build = Build::of(isa);
     let partials: Vec<Vec<T>> = chunks
         .par_chunks(per_block)
         .map(|block| {
@@ -125,21 +156,13 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
             for (i, &chunk) in block.iter().enumerate() {
                 // The block's first chunk writes `du`, the others add to it.
                 let first = i == 0;
-                #[cfg(target_arch = "x86_64")]
-                if avx2 {
-                    // SAFETY: the CPU has AVX2 (checked above).
-                    unsafe {
-                        weight_grad_chunk_avx2::<T, W, M, N>(
-                            &pass,
-                            &mut scratch,
-                            &mut du,
-                            chunk,
-                            first,
-                        )
-                    };
-                    continue;
-                }
-                weight_grad_chunk::<T, W, M, N>(&pass, &mut scratch, &mut du, chunk, first);
+                weight_grad_chunk_in::<T, W, M, N>(
+                    build,
+                    &pass,
+                    &mut scratch,
+                    (&mut du, first),
+                    chunk,
+                );
             }
             // SAFETY: the first chunk's products wrote every value of every position.
             unsafe { du.set_len(p * co * ci) };
@@ -183,6 +206,7 @@ fn grad_weight_with<T: Element, W: Minimal<M, N>, const M: usize, const N: usize
             }
         },
     );
+    partials.into_iter().for_each(recycle);
     // SAFETY: every block wrote every tap of its pairs, and the blocks cover all pairs.
     unsafe { dw.set_len(pairs * taps) };
     dw

@@ -106,7 +106,7 @@ impl ActiveSites {
 
     /// The sites where `active` (`batch` volumes of `dims` voxels, flattened) is true.
     pub fn new(batch: usize, dims: [usize; 3], kernel: usize, active: &[bool]) -> Result<Self> {
-        if kernel % 2 == 0 {
+        if kernel.is_multiple_of(2) {
             return Err(invalid(
                 "active-set kernel",
                 format!("must be odd, got {kernel}"),

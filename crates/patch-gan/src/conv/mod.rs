@@ -3,13 +3,11 @@
 //! on the CPU kernels of `conv-kernels` (chunked im2col + `gemm`, and Winograd).
 
 mod active;
-mod conv2d;
-mod conv3d;
+mod layer;
 pub(crate) mod op;
 mod slices;
 
-pub use conv2d::{conv2d, Conv2d};
-pub use conv3d::{conv3d, conv3d_no_bias, Conv3d};
+pub use layer::{conv2d, conv3d, conv3d_no_bias, Conv, Conv2d, Conv3d};
 
 use candle_core::Tensor;
 use candle_nn::VarBuilder;

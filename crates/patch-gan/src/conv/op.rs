@@ -91,51 +91,6 @@ pub fn conv2d(xs: &Tensor, kernel: &Tensor, cfg: ConvConfig) -> Result<Tensor> {
     Ok(apply(&xs, &kernel, ConvOp(Domain::Grid(spec)))?.reshape((n, c_out, h_out, w_out))?)
 }
 
-/// The input gradient of [`conv3d`] on the CPU: `d/dx sum(grad_out * conv3d(x, kernel))` for an
-/// `x` of `input_dims` `(N, C_in, D, H, W)` (PyTorch's `conv_transpose3d` of `grad_out`). It is
-/// linear in both arguments and differentiable in both, so a critic's input gradient written
-/// with it is an ordinary first-order graph in the critic's weights (a 2D critic's images take
-/// a depth axis of 1).
-pub(crate) fn conv3d_grad_input(
-    grad_out: &Tensor,
-    kernel: &Tensor,
-    cfg: ConvConfig,
-    input_dims: &[usize],
-) -> Result<Tensor> {
-    grid_grad_input(
-        grad_out,
-        kernel,
-        Spec::uniform(cfg),
-        Shape::from(input_dims.to_vec()),
-    )
-}
-
-/// The input gradient of the grid convolution of an `x` of shape `x_shape` (5D) by `kernel`
-/// (5D), after checking that `grad_out` is that convolution's output shape.
-fn grid_grad_input(
-    grad_out: &Tensor,
-    kernel: &Tensor,
-    spec: Spec,
-    x_shape: Shape,
-) -> Result<Tensor> {
-    let g = geometry(&x_shape, kernel.shape(), spec)?;
-    let [d_out, h_out, w_out] = g.output();
-    let expected = [g.batch, g.c_out, d_out, h_out, w_out];
-    if grad_out.dims() != expected {
-        return Err(invalid(
-            "output gradient",
-            format!(
-                "{:?} does not match the output {expected:?} of a {x_shape:?} input and a {:?} \
-                 kernel",
-                grad_out.shape(),
-                kernel.shape()
-            ),
-        ));
-    }
-    let op = GradInputOp(Domain::Grid(spec), x_shape);
-    Ok(apply(grad_out, kernel, op)?)
-}
-
 /// [`conv3d`] built from candle's conv2d over depth slices (what non-CPU devices run); public
 /// so tests and benchmarks can compare it with the CPU kernel.
 ///
@@ -196,21 +151,31 @@ pub fn conv3d_active(
 /// Where a convolution is evaluated: on the whole grid with padding and stride, or on the
 /// active sites of a set (submanifold).
 #[derive(Debug, Clone)]
-enum Domain {
+pub(crate) enum Domain {
     Grid(Spec),
     Active(Arc<ActiveSites>),
 }
 
 /// A convolution's geometry, checked against its arguments' shapes.
 #[derive(Debug, Clone)]
-enum Plan {
+pub(crate) enum Plan {
     Grid(Geometry),
     Active(ActiveGeometry),
 }
 
 impl Domain {
+    /// The whole grid, with `cfg`'s padding and stride.
+    pub(crate) fn grid(cfg: ConvConfig) -> Self {
+        Domain::Grid(Spec::uniform(cfg))
+    }
+
+    /// The active `sites`.
+    pub(crate) fn active(sites: &Arc<ActiveSites>) -> Self {
+        Domain::Active(Arc::clone(sites))
+    }
+
     /// The geometry of `conv(xs, kernel)` in this domain, or an error naming the bad shape.
-    fn plan(&self, xs: &Shape, kernel: &Shape) -> Result<Plan> {
+    pub(crate) fn plan(&self, xs: &Shape, kernel: &Shape) -> Result<Plan> {
         match self {
             Domain::Grid(spec) => Ok(Plan::Grid(geometry(xs, kernel, *spec)?)),
             Domain::Active(sites) => Ok(Plan::Active(active_geometry(xs, kernel, sites)?)),
@@ -223,7 +188,31 @@ impl Domain {
 }
 
 impl Plan {
-    fn output_shape(&self) -> Shape {
+    /// `conv(x, w)` on plain slices.
+    pub(crate) fn forward<T: Element>(&self, x: &[T], w: &[T]) -> Vec<T> {
+        match self {
+            Plan::Grid(g) => grid::forward(x, w, g),
+            Plan::Active(g) => im2col::forward(x, w, g),
+        }
+    }
+
+    /// The input gradient of `sum(grad_out * conv(x, w))`.
+    pub(crate) fn grad_input<T: Element>(&self, grad_out: &[T], w: &[T]) -> Vec<T> {
+        match self {
+            Plan::Grid(g) => grid::grad_input(grad_out, w, g),
+            Plan::Active(g) => active::grad_input(grad_out, w, g),
+        }
+    }
+
+    /// The kernel gradient of `sum(grad_out * conv(x, w))`.
+    pub(crate) fn grad_weight<T: Element>(&self, x: &[T], grad_out: &[T]) -> Vec<T> {
+        match self {
+            Plan::Grid(g) => grid::grad_weight(x, grad_out, g),
+            Plan::Active(g) => im2col::grad_weight(x, grad_out, g),
+        }
+    }
+
+    pub(crate) fn output_shape(&self) -> Shape {
         match self {
             Plan::Grid(g) => {
                 let [d, h, w] = g.output();
@@ -271,7 +260,7 @@ fn active_geometry(xs: &Shape, kernel: &Shape, sites: &Arc<ActiveSites>) -> Resu
 
 /// The parameters every op carries: zero padding per axis `[D, H, W]` and the stride.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Spec {
+pub(crate) struct Spec {
     padding: [usize; 3],
     stride: usize,
 }
@@ -367,18 +356,46 @@ enum Kernel {
 
 impl storage::Kernel for Kernel {
     fn run<T: Element>(&self, a: &[T], b: &[T]) -> candle_core::Result<Vec<T>> {
-        use Plan::{Active, Grid};
         Ok(match self {
-            Kernel::Forward(Grid(g)) if use_winograd(g) => winograd::forward(a, b, g),
-            Kernel::GradInput(Grid(g)) if use_winograd(g) => winograd::grad_input(a, b, g),
-            Kernel::GradWeight(Grid(g)) if use_winograd(g) => winograd::grad_weight(a, b, g),
-            Kernel::Forward(Grid(g)) => im2col::forward(a, b, g),
-            Kernel::GradInput(Grid(g)) => im2col::grad_input(a, b, g),
-            Kernel::GradWeight(Grid(g)) => im2col::grad_weight(a, b, g),
-            Kernel::Forward(Active(g)) => im2col::forward(a, b, g),
-            Kernel::GradInput(Active(g)) => active::grad_input(a, b, g),
-            Kernel::GradWeight(Active(g)) => im2col::grad_weight(a, b, g),
+            Kernel::Forward(plan) => plan.forward(a, b),
+            Kernel::GradInput(plan) => plan.grad_input(a, b),
+            Kernel::GradWeight(plan) => plan.grad_weight(a, b),
         })
+    }
+}
+
+/// The grid convolution's three kernels on plain slices, as the ops run them (Winograd where
+/// it pays, else im2col): for the fused networks, which run layer after layer on buffers.
+pub(crate) mod grid {
+    use conv_kernels::{im2col, winograd, Element, Geometry};
+
+    use super::use_winograd;
+
+    /// `conv(x, w)`.
+    pub(crate) fn forward<T: Element>(x: &[T], w: &[T], g: &Geometry) -> Vec<T> {
+        if use_winograd(g) {
+            winograd::forward(x, w, g)
+        } else {
+            im2col::forward(x, w, g)
+        }
+    }
+
+    /// The input gradient of `sum(grad_out * conv(x, w))`.
+    pub(crate) fn grad_input<T: Element>(grad_out: &[T], w: &[T], g: &Geometry) -> Vec<T> {
+        if use_winograd(g) {
+            winograd::grad_input(grad_out, w, g)
+        } else {
+            im2col::grad_input(grad_out, w, g)
+        }
+    }
+
+    /// The kernel gradient of `sum(grad_out * conv(x, w))`.
+    pub(crate) fn grad_weight<T: Element>(x: &[T], grad_out: &[T], g: &Geometry) -> Vec<T> {
+        if use_winograd(g) {
+            winograd::grad_weight(x, grad_out, g)
+        } else {
+            im2col::grad_weight(x, grad_out, g)
+        }
     }
 }
 

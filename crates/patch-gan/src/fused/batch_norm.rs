@@ -72,7 +72,7 @@ fn lock(
         .map_err(|_| candle_core::Error::Msg("batch-norm: statistics lock poisoned".into()))
 }
 
-pub(super) struct BatchNormAct {
+struct BatchNormAct {
     stats: NormStats,
     eps: f64,
     slope: f64,
@@ -80,7 +80,7 @@ pub(super) struct BatchNormAct {
 }
 
 impl BatchNormAct {
-    pub(super) fn new(stats: NormStats, eps: f64, slope: f64) -> Self {
+    fn new(stats: NormStats, eps: f64, slope: f64) -> Self {
         Self {
             stats,
             eps,
@@ -89,14 +89,9 @@ impl BatchNormAct {
         }
     }
 
-    /// The batch statistics the forward pass measured (with [`NormStats::Batch`]).
-    pub(super) fn measured(&self) -> candle_core::Result<Option<BatchStats>> {
-        Ok(lock(&self.saved)?.as_ref().and_then(|s| s.batch.clone()))
-    }
-
     /// The gradients of `sum(grad * y)` with respect to the input `x` the forward pass
     /// normalised, gamma and beta, each if `want`ed.
-    pub(super) fn grads(
+    fn grads(
         &self,
         x: &Tensor,
         grad: &Tensor,

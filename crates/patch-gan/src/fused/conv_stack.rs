@@ -1,22 +1,26 @@
-//! A generator's layers in training mode as one op: blocks of grid convolution, BatchNorm (batch
-//! statistics) and LeakyReLU, then a last convolution.
+//! A generator's layers in training mode as one op: blocks of convolution (on the grid or on
+//! active sites), BatchNorm (batch statistics) and LeakyReLU, then a last convolution.
 //!
 //! The same kernels as the layers run one by one (the convolution op and
 //! [`super::batch_norm_act`]), with the same bits; what goes is the graph nodes between them.
 //! candle's backward pass adds every gradient it meets into a fresh zero tensor of its node's
 //! size: a `zeros_like` and an `add` of a whole layer per block, on the calling thread while the
-//! kernels' threads waited. Here the gradient flows from layer to layer inside the op: what
-//! candle still accumulates is the stack's input and output, and the parameters (packed into
-//! one vector, so each parameter's own small gradient too).
+//! kernels' threads waited. Here the layers run on plain buffers and the gradient flows from
+//! layer to layer inside the op: what candle still accumulates is the stack's input and output,
+//! and the parameters (packed into one vector, so each parameter's own small gradient too).
+//! The buffers are recycled for the next step ([`conv_kernels::recycle`]) when the graph goes.
 
+use std::any::Any;
 use std::sync::{Arc, Mutex};
 
-use candle_core::op::BackpropOp;
-use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Storage, Tensor};
+use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
+use conv_kernels::fused::{self, NormParams};
+use conv_kernels::{recycle, Element};
 
-use super::batch_norm::{BatchNormAct, BatchStats, NormStats};
-use crate::conv::op::{grid_conv_grads_wanted, grid_conv_storage};
-use crate::conv::ConvConfig;
+use super::batch_norm::BatchStats;
+use super::channels_and_plane;
+use crate::conv::op::{Domain, Plan};
+use crate::storage::{into_storage, run_pass, run_pass_on, Pass};
 
 /// One block of a [`conv_norm_stack`]: its convolution's kernel `(C_out, C_in, k, k, k)` and
 /// its normalisation's gamma and beta, each `(C_out,)`.
@@ -27,18 +31,18 @@ pub(crate) struct StackBlock<'a> {
 }
 
 /// `conv(h_L, last)` with `h_{i+1} = LeakyReLU_slope(BatchNorm(conv(h_i, kernel_i)))` from
-/// `h_0 = xs` over `blocks` (batch statistics: training mode), every convolution with `cfg` and
-/// no bias; and each block's statistics. Differentiable once in `xs` and every parameter; CPU
-/// only.
+/// `h_0 = xs` over `blocks` (batch statistics: training mode), every convolution in `domain`
+/// and without bias; and each block's statistics. Differentiable once in `xs` and every
+/// parameter; CPU only.
 pub(crate) fn conv_norm_stack(
     xs: &Tensor,
     blocks: &[StackBlock<'_>],
     last: &Tensor,
-    cfg: ConvConfig,
+    domain: Domain,
     (eps, slope): (f64, f64),
 ) -> candle_core::Result<(Tensor, Vec<Option<BatchStats>>)> {
     let mut parts = Vec::with_capacity(3 * blocks.len() + 1);
-    let mut layout = Vec::with_capacity(blocks.len() + 1);
+    let mut kernels = Vec::with_capacity(blocks.len() + 1);
     for (i, block) in blocks.iter().enumerate() {
         let channels = match block.kernel.dims() {
             &[c_out, _, _, _, _] => c_out,
@@ -52,7 +56,7 @@ pub(crate) fn conv_norm_stack(
                 );
             }
         }
-        layout.push(block.kernel.shape().clone());
+        kernels.push(block.kernel.shape().clone());
         parts.extend([
             block.kernel.flatten_all()?,
             block.gamma.clone(),
@@ -65,10 +69,10 @@ pub(crate) fn conv_norm_stack(
             last.dims()
         );
     }
-    layout.push(last.shape().clone());
+    kernels.push(last.shape().clone());
     parts.push(last.flatten_all()?);
     let params = Tensor::cat(&parts, 0)?;
-    let starts = layout
+    let starts = kernels
         .iter()
         .scan(0, |at, shape| {
             let start = *at;
@@ -78,44 +82,78 @@ pub(crate) fn conv_norm_stack(
         })
         .collect();
     let op = Arc::new(ConvNormStack {
-        cfg,
-        kernels: layout,
+        domain,
+        kernels,
         starts,
-        norms: blocks
-            .iter()
-            .map(|_| BatchNormAct::new(NormStats::Batch, eps, slope))
-            .collect(),
+        eps,
+        slope,
         saved: Mutex::new(None),
     });
     let ys = xs
         .contiguous()?
         .apply_op2(&params, Shared(Arc::clone(&op)))?;
-    let stats = op
-        .norms
-        .iter()
-        .map(BatchNormAct::measured)
-        .collect::<candle_core::Result<_>>()?;
+    let stats = lock(&op.saved)?
+        .as_ref()
+        .map(|saved| saved.stats.iter().cloned().map(Some).collect())
+        .unwrap_or_default();
     Ok((ys, stats))
 }
 
-/// The op's state.
+/// The op's configuration and state.
 struct ConvNormStack {
-    cfg: ConvConfig,
+    domain: Domain,
     /// The kernels' shapes, the blocks' then the last convolution's.
     kernels: Vec<Shape>,
     /// Where each kernel starts in the packed parameters (a block's gamma and beta follow it).
     starts: Vec<usize>,
-    norms: Vec<BatchNormAct>,
-    /// What the forward pass leaves for the backward pass, as the graph nodes it replaces held
-    /// it.
+    eps: f64,
+    slope: f64,
+    /// What the forward pass leaves for the backward pass.
     saved: Mutex<Option<Saved>>,
 }
 
-/// Per block, its convolution's output (the normalisation's input); and the inputs of the
-/// convolutions after the first (`h_1 ..= h_L`).
+/// Per block, the normalisation it applied and the batch statistics it measured; and the
+/// layers' buffers ([`Buffers`] of the element type the op ran on).
 struct Saved {
-    convolved: Vec<Tensor>,
-    inputs: Vec<Tensor>,
+    norms: Vec<NormParams>,
+    stats: Vec<BatchStats>,
+    buffers: Box<dyn Any + Send>,
+}
+
+/// Per block, its convolution's output (the normalisation's input) and its output (the next
+/// convolution's input), recycled when the op goes.
+struct Buffers<T: Element> {
+    convolved: Vec<Vec<T>>,
+    outputs: Vec<Vec<T>>,
+}
+
+impl<T: Element> Drop for Buffers<T> {
+    fn drop(&mut self) {
+        self.convolved
+            .drain(..)
+            .chain(self.outputs.drain(..))
+            .for_each(recycle);
+    }
+}
+
+impl ConvNormStack {
+    /// Each layer's plan for an input of `shape`.
+    fn plans(&self, shape: &Shape) -> candle_core::Result<Vec<Plan>> {
+        let mut shape = shape.clone();
+        self.kernels
+            .iter()
+            .map(|kernel| {
+                let plan = self.domain.plan(&shape, kernel)?;
+                shape = plan.output_shape();
+                Ok(plan)
+            })
+            .collect()
+    }
+
+    /// Kernel `i` in the packed parameters.
+    fn kernel<'a, T>(&self, params: &'a [T], i: usize) -> &'a [T] {
+        &params[self.starts[i]..][..self.kernels[i].elem_count()]
+    }
 }
 
 /// The op as candle holds it, `(xs, params) -> ys`, sharing its state with
@@ -135,47 +173,20 @@ impl CustomOp2 for Shared {
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let op = &self.0;
-        let blocks = op.norms.len();
-        let end = op.starts[blocks];
-        let expected = end + op.kernels[blocks].elem_count();
-        if !l2.is_contiguous() || l2.shape().elem_count() != expected {
+        let blocks = op.kernels.len() - 1;
+        let expected = op.starts[blocks] + op.kernels[blocks].elem_count();
+        if l2.shape().elem_count() != expected {
             candle_core::bail!(
-                "{}: parameters must be one contiguous ({expected},) tensor, got {:?}",
+                "{}: parameters must be one ({expected},) tensor, got {:?}",
                 self.name(),
                 l2.shape()
             );
         }
-        let param = |at: usize, shape: &Shape| {
-            Layout::contiguous_with_offset(shape, l2.start_offset() + at)
-        };
-        // The next convolution, of the last block's output (of `xs` before the first block).
-        let convolve = |inputs: &[(CpuStorage, Shape)], kernel: &Layout| match inputs.last() {
-            None => grid_conv_storage(op.cfg, (s1, l1), (s2, kernel)),
-            Some((h, shape)) => {
-                grid_conv_storage(op.cfg, (h, &Layout::contiguous(shape)), (s2, kernel))
-            }
-        };
-        let mut convolved = Vec::with_capacity(blocks);
-        let mut inputs: Vec<(CpuStorage, Shape)> = Vec::with_capacity(blocks);
-        for (i, norm) in op.norms.iter().enumerate() {
-            let (at, channels) = (op.starts[i], op.kernels[i].dims()[0]);
-            let (z, z_shape) = convolve(&inputs, &param(at, &op.kernels[i]))?;
-            let after_kernel = at + op.kernels[i].elem_count();
-            let gamma = param(after_kernel, &Shape::from(channels));
-            let beta = param(after_kernel + channels, &Shape::from(channels));
-            let z_layout = Layout::contiguous(&z_shape);
-            inputs.push(norm.cpu_fwd(&z, &z_layout, s2, &gamma, s2, &beta)?);
-            convolved.push((z, z_shape));
-        }
-        let out = convolve(&inputs, &param(end, &op.kernels[blocks]))?;
-        let tensor = |(storage, shape): (CpuStorage, Shape)| {
-            Tensor::from_storage(Storage::Cpu(storage), shape, BackpropOp::none(), false)
-        };
-        *lock(&op.saved)? = Some(Saved {
-            convolved: convolved.into_iter().map(tensor).collect(),
-            inputs: inputs.into_iter().map(tensor).collect(),
-        });
-        Ok(out)
+        let plans = op.plans(l1.shape())?;
+        let shape = plans[blocks].output_shape();
+        let pass = StackForward { op, plans: &plans };
+        let mut out = run_pass(self.name(), &[(s1, l1), (s2, l2)], &pass)?;
+        Ok((out.remove(0), shape))
     }
 
     fn bwd(
@@ -186,64 +197,173 @@ impl CustomOp2 for Shared {
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
         let op = &self.0;
-        let saved = lock(&op.saved)?;
-        let saved = saved.as_ref().ok_or_else(|| {
-            candle_core::Error::Msg(format!("{}: backward before forward", self.name()))
-        })?;
-        let want_params = params.track_op();
-        // The kernels as plain tensors: the gradients below are made, not differentiated again.
-        let params_value = params.detach();
-        let kernel = |i: usize| {
-            params_value
-                .narrow(0, op.starts[i], op.kernels[i].elem_count())?
-                .reshape(&op.kernels[i])
+        let pass = StackBackward {
+            op,
+            plans: &op.plans(xs.shape())?,
+            want_input: xs.track_op(),
+            want_params: params.track_op(),
         };
-        let blocks = op.norms.len();
-        let input = |i: usize| if i == 0 { xs } else { &saved.inputs[i - 1] };
-        // Gradients of the packed parameters, gathered from the last layer back.
-        let mut param_grads = Vec::with_capacity(3 * blocks + 1);
-        let want_input = |i: usize| i > 0 || xs.track_op();
-        let (mut grad_h, grad_last) = grid_conv_grads_wanted(
-            input(blocks),
-            &kernel(blocks)?,
-            op.cfg,
-            grad,
-            [want_input(blocks), want_params],
-        )?;
-        param_grads.extend(grad_last.map(|g| g.flatten_all()).transpose()?);
-        for i in (0..blocks).rev() {
-            // Every block after the first asks for its input's gradient (`want_input`).
-            let grad_out = grad_h.ok_or_else(|| {
-                candle_core::Error::Msg(format!("{}: no gradient into block {i}", self.name()))
-            })?;
-            let [grad_z, grad_gamma, grad_beta] = op.norms[i].grads(
-                &saved.convolved[i],
-                &grad_out,
-                [true, want_params, want_params],
-            )?;
-            let grad_z = grad_z.ok_or_else(|| {
-                candle_core::Error::Msg(format!("{}: no gradient of block {i}", self.name()))
-            })?;
-            let (grad_in, grad_kernel) = grid_conv_grads_wanted(
-                input(i),
-                &kernel(i)?,
-                op.cfg,
-                &grad_z,
-                [want_input(i), want_params],
-            )?;
-            // Pushed in reverse, reversed at the end: beta, gamma, kernel.
-            param_grads.extend(grad_beta);
-            param_grads.extend(grad_gamma);
-            param_grads.extend(grad_kernel.map(|g| g.flatten_all()).transpose()?);
-            grad_h = grad_in;
-        }
-        let grad_params = if want_params {
-            param_grads.reverse();
-            Some(Tensor::cat(&param_grads, 0)?)
+        let grad = grad.contiguous()?;
+        let mut out = run_pass_on(self.name(), &[xs, params, &grad], &pass)?.into_iter();
+        let as_tensor = |storage: Option<CpuStorage>, shape: &Shape| {
+            storage.map(|s| {
+                Tensor::from_storage(
+                    candle_core::Storage::Cpu(s),
+                    shape.clone(),
+                    candle_core::op::BackpropOp::none(),
+                    false,
+                )
+            })
+        };
+        let grad_params = if pass.want_params {
+            as_tensor(out.next(), params.shape())
         } else {
             None
         };
-        Ok((grad_h.filter(|_| xs.track_op()), grad_params))
+        let grad_xs = if pass.want_input {
+            as_tensor(out.next(), xs.shape())
+        } else {
+            None
+        };
+        Ok((grad_xs, grad_params))
+    }
+}
+
+struct StackForward<'a> {
+    op: &'a ConvNormStack,
+    plans: &'a [Plan],
+}
+
+impl Pass for StackForward<'_> {
+    fn run<T: Element>(&self, inputs: &[&[T]]) -> candle_core::Result<Vec<CpuStorage>> {
+        let (op, plans) = (self.op, self.plans);
+        let (xs, params) = (inputs[0], inputs[1]);
+        let blocks = plans.len() - 1;
+        let mut buffers = Buffers::<T> {
+            convolved: Vec::with_capacity(blocks),
+            outputs: Vec::with_capacity(blocks),
+        };
+        let (mut norms, mut stats) = (Vec::with_capacity(blocks), Vec::with_capacity(blocks));
+        for (i, plan) in plans[..blocks].iter().enumerate() {
+            let input = buffers.outputs.last().map_or(xs, |h| h.as_slice());
+            let z = plan.forward(input, op.kernel(params, i));
+            let (channels, plane) = channels_and_plane(plan.output_shape().dims());
+            let (mean, var): (Vec<f64>, Vec<f64>) = fused::channel_stats(&z, channels, plane)
+                .into_iter()
+                .unzip();
+            let after_kernel = op.starts[i] + op.kernels[i].elem_count();
+            let param = |at: usize| {
+                params[at..at + channels]
+                    .iter()
+                    .map(|v| v.to_f64())
+                    .collect()
+            };
+            let norm = NormParams {
+                inv_std: var.iter().map(|v| 1.0 / (v + op.eps).sqrt()).collect(),
+                mean: mean.clone(),
+                gamma: param(after_kernel),
+                beta: param(after_kernel + channels),
+            };
+            buffers
+                .outputs
+                .push(fused::batch_norm_act(&z, plane, &norm, op.slope));
+            buffers.convolved.push(z);
+            stats.push(BatchStats {
+                mean,
+                var,
+                count: z_count(plan, channels),
+            });
+            norms.push(norm);
+        }
+        let last = buffers.outputs.last().map_or(xs, |h| h.as_slice());
+        let ys = plans[blocks].forward(last, op.kernel(params, blocks));
+        *lock(&op.saved)? = Some(Saved {
+            norms,
+            stats,
+            buffers: Box::new(buffers),
+        });
+        Ok(vec![into_storage(ys)])
+    }
+}
+
+/// Values per channel of a plan's output: what BatchNorm's statistics average over.
+fn z_count(plan: &Plan, channels: usize) -> usize {
+    plan.output_shape().elem_count() / channels
+}
+
+struct StackBackward<'a> {
+    op: &'a ConvNormStack,
+    plans: &'a [Plan],
+    want_input: bool,
+    want_params: bool,
+}
+
+impl Pass for StackBackward<'_> {
+    /// The packed parameters' gradient (if wanted), then the input's (if wanted).
+    fn run<T: Element>(&self, inputs: &[&[T]]) -> candle_core::Result<Vec<CpuStorage>> {
+        let (op, plans) = (self.op, self.plans);
+        let (xs, params, grad) = (inputs[0], inputs[1], inputs[2]);
+        let saved = lock(&op.saved)?;
+        let Some((saved, buffers)) = saved
+            .as_ref()
+            .and_then(|s| Some((s, s.buffers.downcast_ref::<Buffers<T>>()?)))
+        else {
+            candle_core::bail!("conv-norm-stack: backward before forward");
+        };
+        let blocks = plans.len() - 1;
+        let input = |i: usize| if i == 0 { xs } else { &buffers.outputs[i - 1] };
+        let mut grad_params = if self.want_params {
+            vec![T::ZERO; params.len()]
+        } else {
+            Vec::new()
+        };
+        let mut write = |at: usize, values: &[T]| {
+            if self.want_params {
+                grad_params[at..at + values.len()].copy_from_slice(values);
+            }
+        };
+        if self.want_params {
+            write(
+                op.starts[blocks],
+                &plans[blocks].grad_weight(input(blocks), grad),
+            );
+        }
+        let mut grad_h = plans[blocks].grad_input(grad, op.kernel(params, blocks));
+        for i in (0..blocks).rev() {
+            let z = &buffers.convolved[i];
+            let (channels, plane) = channels_and_plane(plans[i].output_shape().dims());
+            let packed = fused::batch_norm_act_backward(
+                (z, &grad_h),
+                plane,
+                &saved.norms[i],
+                (true, op.slope),
+            );
+            recycle(grad_h);
+            let (grad_z, gamma_beta) = packed.split_at(z.len());
+            if self.want_params {
+                write(op.starts[i], &plans[i].grad_weight(input(i), grad_z));
+                write(
+                    op.starts[i] + op.kernels[i].elem_count(),
+                    &gamma_beta[..2 * channels],
+                );
+            }
+            grad_h = if i > 0 || self.want_input {
+                plans[i].grad_input(grad_z, op.kernel(params, i))
+            } else {
+                Vec::new()
+            };
+            recycle(packed);
+        }
+        let mut out = Vec::with_capacity(2);
+        if self.want_params {
+            out.push(into_storage(grad_params));
+        }
+        if self.want_input {
+            out.push(into_storage(grad_h));
+        } else {
+            recycle(grad_h);
+        }
+        Ok(out)
     }
 }
 
@@ -258,8 +378,9 @@ mod tests {
 
     use super::*;
     use crate::conv::op::conv3d;
-    use crate::fused::batch_norm_act;
     use crate::fused::tests::{assert_same_values_and_gradients, random};
+    use crate::fused::{batch_norm_act, NormStats};
+    use crate::ConvConfig;
 
     /// The stack against its layers run one by one (`conv3d` and `batch_norm_act`): the
     /// same output, statistics and gradients of the input and every parameter, bit for bit (the
@@ -289,7 +410,8 @@ mod tests {
                 beta: &betas[i],
             })
             .collect();
-        let (fused, fused_stats) = conv_norm_stack(&x, &blocks, &last, cfg, (eps, slope)).unwrap();
+        let stack = conv_norm_stack(&x, &blocks, &last, Domain::grid(cfg), (eps, slope));
+        let (fused, fused_stats) = stack.unwrap();
 
         let mut h = x.as_tensor().clone();
         let mut plain_stats = Vec::new();
@@ -337,11 +459,12 @@ mod tests {
             gamma: &gamma,
             beta: &beta,
         }];
-        let (ys, _) = conv_norm_stack(&x, &block, &last, cfg, (1e-5, 0.2)).unwrap();
+        let domain = || Domain::grid(cfg);
+        let (ys, _) = conv_norm_stack(&x, &block, &last, domain(), (1e-5, 0.2)).unwrap();
         let grads = ys.sqr().unwrap().sum_all().unwrap().backward().unwrap();
         assert!(grads.get(&x).is_none());
         let tracked = Var::from_tensor(&x).unwrap();
-        let (ys2, _) = conv_norm_stack(&tracked, &block, &last, cfg, (1e-5, 0.2)).unwrap();
+        let (ys2, _) = conv_norm_stack(&tracked, &block, &last, domain(), (1e-5, 0.2)).unwrap();
         let grads2 = ys2.sqr().unwrap().sum_all().unwrap().backward().unwrap();
         assert!(grads2.get(&tracked).is_some());
         let values = |grads: &candle_core::backprop::GradStore, var: &Var| {
@@ -366,7 +489,7 @@ mod tests {
             gamma: &gamma,
             beta: &short_beta,
         }];
-        let err = conv_norm_stack(&x, &block, &last, cfg, (1e-5, 0.2)).unwrap_err();
+        let err = conv_norm_stack(&x, &block, &last, Domain::grid(cfg), (1e-5, 0.2)).unwrap_err();
         assert!(err.to_string().contains("block 0's beta [4]"), "{err}");
         let flat = kernel.flatten_all().unwrap();
         let block = [StackBlock {
@@ -374,7 +497,7 @@ mod tests {
             gamma: &gamma,
             beta: &gamma,
         }];
-        let err = conv_norm_stack(&x, &block, &last, cfg, (1e-5, 0.2)).unwrap_err();
+        let err = conv_norm_stack(&x, &block, &last, Domain::grid(cfg), (1e-5, 0.2)).unwrap_err();
         assert!(err.to_string().contains("not 5D"), "{err}");
     }
 }

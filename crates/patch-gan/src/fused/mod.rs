@@ -14,12 +14,13 @@ mod batch_norm;
 mod channel_sum;
 mod conv_leaky;
 mod conv_stack;
+pub(crate) mod critic;
 mod leaky;
 
 pub(crate) use batch_norm::{batch_norm_act, BatchStats, NormStats};
 pub(crate) use conv_leaky::conv_bias_leaky;
 pub(crate) use conv_stack::{conv_norm_stack, StackBlock};
-pub(crate) use leaky::{bias_add, leaky_grad};
+pub(crate) use leaky::bias_add;
 // The device form of LeakyReLU, which the CPU's tests compare with the fused kernel.
 #[cfg(test)]
 pub(crate) use leaky::leaky_relu_by_ops;

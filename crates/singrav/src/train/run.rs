@@ -414,7 +414,7 @@ fn checkpoint_due(config: &TrainConfig, state: &TrainState, last_checkpoint: &In
     let by_time =
         run.checkpoint_seconds > 0 && last_checkpoint.elapsed().as_secs() >= run.checkpoint_seconds;
     let by_count =
-        run.checkpoint_iterations > 0 && state.iteration % run.checkpoint_iterations == 0;
+        run.checkpoint_iterations > 0 && state.iteration.is_multiple_of(run.checkpoint_iterations);
     by_time || by_count
 }
 

@@ -48,7 +48,7 @@ pub(super) fn gltf(mesh: &Mesh) -> Result<Vec<u8>> {
 
 /// Zero- (or space-) padding to a multiple of 4 bytes, as glTF's chunks and views need.
 fn pad(bytes: &mut Vec<u8>, with: u8) {
-    while bytes.len() % 4 != 0 {
+    while !bytes.len().is_multiple_of(4) {
         bytes.push(with);
     }
 }
