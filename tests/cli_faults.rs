@@ -38,7 +38,7 @@ fn train_command(data: &Path, run: &Path) -> Command {
 
 /// Every tensor of `run`'s checkpoint, as bits.
 fn checkpoint_bits(run: &Path) -> Vec<(String, Vec<u32>)> {
-    let checkpoint = Checkpoint::load(&RunDir::new(&run).checkpoint(), &Device::Cpu).unwrap();
+    let checkpoint = Checkpoint::load(&RunDir::new(run).checkpoint(), &Device::Cpu).unwrap();
     let mut tensors: Vec<(String, Vec<u32>)> = checkpoint
         .tensors
         .iter()
@@ -147,8 +147,8 @@ fn a_full_disk_names_the_file_and_its_size_and_keeps_the_last_checkpoint() {
 
     let run = tmp.path().join("full");
     let mut command = train_command(&data, &run);
-    // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
     #[allow(unsafe_code)] // The test's own process limit, set in the child before exec.
+    // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
     unsafe {
         command.pre_exec(move || {
             let limit = libc::rlimit {

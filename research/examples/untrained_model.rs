@@ -18,9 +18,9 @@
 use std::path::PathBuf;
 
 use candle_core::Device;
-use singrav::checkpoint::{Checkpoint, TrainState, CHECKPOINT_FILE};
+use singrav::checkpoint::{Checkpoint, TrainState};
 use singrav::noise::step_rng;
-use singrav::{SinGrav, TrainConfig};
+use singrav::{RunDir, SinGrav, TrainConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -69,7 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         state,
         tensors: model.tensors(),
     }
-    .save(&out.join(CHECKPOINT_FILE))?;
+    .save(&RunDir::new(&out).checkpoint())?;
     println!(
         "{}: untrained model, volumes {:?}, renderings {:?}, final pictures {}^2",
         out.display(),

@@ -7,6 +7,9 @@
 //! cargo run --release -p conv-kernels --example gemm_rate -- 2048 2 5    # S, T, R
 //! ```
 
+// The `gemm` crate's entry point is `unsafe` (raw pointers and strides); nothing else here is.
+#![allow(unsafe_code)]
+
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -1,3 +1,5 @@
+//! patch-gan's criterion benchmarks: Conv3d against candle's matmul, and critic steps.
+
 // Setting candle's environment switches (`std::env::set_var`) is `unsafe`; nothing else is.
 #![allow(unsafe_code)]
 

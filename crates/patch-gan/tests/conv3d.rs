@@ -379,6 +379,7 @@ fn loads_pytorch_names_from_safetensors() {
     };
     assert!(same(conv.weight(), &w) && same(conv.bias().unwrap(), &b));
     // A wrong shape is an error, not a silent reinterpretation.
+    // SAFETY: the file was written above and nothing changes it while it is mapped.
     let vb = unsafe { VarBuilder::from_mmaped_safetensors(&[&path], DType::F64, &dev) }.unwrap();
     assert!(conv3d(2, 3, 3, ConvConfig::default(), vb.pp("layer")).is_err());
 }

@@ -72,7 +72,7 @@ fn run_with(
 }
 
 fn checkpoint_tensors(dir: &Path) -> HashMap<String, Tensor> {
-    Checkpoint::load(&RunDir::new(&dir).checkpoint(), &Device::Cpu)
+    Checkpoint::load(&RunDir::new(dir).checkpoint(), &Device::Cpu)
         .unwrap()
         .tensors
 }
