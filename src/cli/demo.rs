@@ -23,9 +23,11 @@ use super::train::{load_dataset, train_with_progress, TrainOptions};
 /// Arguments of `volgen demo`.
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
-    /// Output directory.
-    #[arg(long, value_name = "DIR", default_value = "out/demo")]
-    out: PathBuf,
+    /// Output directory [default: out/demo for the stones at `tiny`; another scene or preset
+    /// adds its names, as out/demo-hd or out/demo-islands-small, so that one demo never meets
+    /// another's run]
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
     /// The built-in scene to learn.
     #[arg(long, default_value = "stones", value_parser = super::scene::built_in_scenes())]
     scene: SceneKind,
@@ -40,6 +42,29 @@ pub struct DemoArgs {
     resolution: Option<usize>,
     #[command(flatten)]
     train: TrainOptions,
+}
+
+impl DemoArgs {
+    /// The output directory: `--out`, or `out/demo` with the scene and preset named where they
+    /// are not the defaults.
+    fn out(&self) -> PathBuf {
+        self.out
+            .clone()
+            .unwrap_or_else(|| default_out(self.scene, &self.train.preset))
+    }
+}
+
+/// `out/demo`, suffixed by the scene unless it is the stones and by the preset unless it is
+/// `tiny`: a demo of another scene or preset would find the default run and be refused.
+fn default_out(scene: SceneKind, preset: &str) -> PathBuf {
+    let mut name = String::from("demo");
+    if scene != SceneKind::StandingStones {
+        write!(name, "-{}", scene.name()).expect("writing to a String");
+    }
+    if preset != "tiny" {
+        write!(name, "-{preset}").expect("writing to a String");
+    }
+    Path::new("out").join(name)
 }
 
 /// Frames of each sample's turntable GIF.
@@ -70,10 +95,11 @@ struct Summary {
 /// Runs the demo.
 pub fn run(args: &DemoArgs) -> Result<()> {
     let config = args.train.config()?;
-    let dataset_dir = args.out.join("dataset");
-    let run_dir = args.out.join("run");
+    let out = args.out();
+    let dataset_dir = out.join("dataset");
+    let run_dir = out.join("run");
     let run = RunDir::new(&run_dir);
-    let samples_dir = args.out.join("samples");
+    let samples_dir = out.join("samples");
 
     let started = Instant::now();
     let resolution = args
@@ -135,7 +161,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         vary_from: 1,
     };
     let samples = sample_to_dir(&model, &views, draws, &samples_dir, outputs)?;
-    let overview = args.out.join("overview.png");
+    let overview = out.join("overview.png");
     let real = input_views_at_sample_size(&model, &dataset, input_views, &samples)?;
     write_overview(&overview, &real, &samples)?;
     let generated: Vec<_> = samples.iter().map(|s| s.views.clone()).collect();
@@ -164,12 +190,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             .map(|n| run.scale_picture(n))
             .collect(),
     };
-    write_summary(&args.out, &summary)?;
+    write_summary(&out, &summary)?;
     println!(
         "done: overview {} (top row: input views; below: generated scenes)",
         overview.display()
     );
-    println!("      summary  {}", args.out.join("summary.md").display());
+    println!("      summary  {}", out.join("summary.md").display());
     println!("      volumes  {}", summary.samples.display());
     Ok(())
 }
@@ -310,4 +336,27 @@ fn write_text(path: &Path, text: &str) -> Result<()> {
         path,
         text.as_bytes(),
     )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn demos_of_other_scenes_and_presets_default_to_their_own_directories() {
+        assert_eq!(
+            default_out(SceneKind::StandingStones, "tiny"),
+            Path::new("out/demo")
+        );
+        assert_eq!(
+            default_out(SceneKind::StandingStones, "hd"),
+            Path::new("out/demo-hd")
+        );
+        let islands = "islands".parse().unwrap();
+        assert_eq!(
+            default_out(islands, "small"),
+            Path::new("out/demo-islands-small")
+        );
+        assert_eq!(default_out(islands, "tiny"), Path::new("out/demo-islands"));
+    }
 }

@@ -25,7 +25,7 @@
 //! let device = candle_core::Device::Cpu;
 //! let outcome = train(&config, &data, "runs/stones".as_ref(), &RunOptions::default(), &device, &mut |_| Control::Continue)?;
 //! if let TrainOutcome::Finished(model) = outcome {
-//!     let cameras = singrav::sample::showcase_cameras(3, model.render_size())?;
+//!     let cameras = model.showcase_cameras(3)?;
 //!     let scene = model.sample(&mut rand::rng(), &cameras)?;
 //!     // Physical density per voxel, 3x finer: other tools then render `tiny`'s
 //!     // post-activated edges as volgen does (`scene.volume` is the model's own grid).

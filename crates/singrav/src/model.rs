@@ -3,6 +3,7 @@
 //! amplitudes and the fixed reconstruction noise z*_1.
 
 use std::collections::HashMap;
+use std::path::Path;
 use std::sync::Arc;
 
 use candle_core::{DType, Device, ModuleT, Tensor, Var};
@@ -11,8 +12,9 @@ use patch_gan::{Generator3d, Generator3dConfig, Upsampler2d, Upsampler2dConfig};
 use radiance_volume::resample_tensor;
 
 use crate::active_set::active_sites;
+use crate::checkpoint::{Checkpoint, TrainState};
 use crate::config::TrainConfig;
-use crate::error::{invalid, Result};
+use crate::error::{invalid, Error, Result};
 use crate::extent::Extended;
 use crate::noise::{gaussian_grid, gaussian_volume};
 
@@ -483,6 +485,29 @@ impl SinGrav {
             out.insert(RECONSTRUCTION_DETAIL_TENSOR.into(), detail.clone());
         }
         out
+    }
+
+    /// Loads a trained pyramid from a run directory or checkpoint file, with its state (to
+    /// report, for example, whether training finished).
+    pub fn load(model: &Path, device: &Device) -> Result<(Self, TrainState)> {
+        let path = crate::RunDir::checkpoint_of(model);
+        let checkpoint = Checkpoint::load(&path, device)?;
+        let state = checkpoint.state;
+        if state.noise_amps.is_empty() {
+            return Err(Error::Checkpoint {
+                path,
+                why: "no scale has been trained yet".into(),
+            });
+        }
+        let model = Self::from_tensors(
+            &checkpoint.config,
+            &checkpoint.tensors,
+            &state.noise_amps,
+            state.upsampler && state.finished(&checkpoint.config),
+            device,
+        )
+        .map_err(|why| Error::Checkpoint { path, why })?;
+        Ok((model, state))
     }
 
     /// Rebuilds a pyramid with `scales` 3D scales (and the upsampler when `upsampler` is set)

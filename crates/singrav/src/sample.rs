@@ -1,16 +1,14 @@
 //! Sampling new scenes from a trained pyramid: a physical radiance volume per scene, and
 //! renderings through the upsampler from chosen cameras.
 
-use std::path::Path;
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
+use candle_core::Tensor;
 use glam::Vec3;
 use radiance_volume::{Aabb, Activation, RadianceVolume, Resampled};
 use volrender::{Camera, DensityInterpolation, RenderConfig, PAPER_FOV_DEG, PAPER_RADIUS};
 
-use crate::checkpoint::{Checkpoint, TrainState};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::SinGrav;
 use crate::render::{ViewMaps, ViewRenderer};
 use rgbd_dataset::Dataset;
@@ -51,7 +49,9 @@ pub fn view_chunks(cameras: &[Camera]) -> impl Iterator<Item = &[Camera]> {
 }
 
 /// `count` cameras on the paper's radius at 35 degrees elevation, evenly spaced in azimuth,
-/// looking at the centre: fixed views for comparing samples.
+/// looking at the centre: fixed views for comparing samples, for a configuration without a
+/// model (its sizes only). With a model, take [`SinGrav::showcase_cameras`], the one that
+/// frames a scene of any [extent](SinGrav::set_extent).
 ///
 /// ```
 /// let cams = singrav::sample::showcase_cameras(3, 32)?;
@@ -88,29 +88,6 @@ fn showcase_cameras_at(count: usize, size: usize, radius: f32) -> Result<Vec<Cam
 }
 
 impl SinGrav {
-    /// Loads a trained pyramid from a run directory or checkpoint file, with its state (to
-    /// report, for example, whether training finished).
-    pub fn load(model: &Path, device: &Device) -> Result<(Self, TrainState)> {
-        let path = crate::RunDir::checkpoint_of(model);
-        let checkpoint = Checkpoint::load(&path, device)?;
-        let state = checkpoint.state;
-        if state.noise_amps.is_empty() {
-            return Err(Error::Checkpoint {
-                path,
-                why: "no scale has been trained yet".into(),
-            });
-        }
-        let model = Self::from_tensors(
-            &checkpoint.config,
-            &checkpoint.tensors,
-            &state.noise_amps,
-            state.upsampler && state.finished(&checkpoint.config),
-            device,
-        )
-        .map_err(|why| Error::Checkpoint { path, why })?;
-        Ok((model, state))
-    }
-
     /// Generates one scene with noise from `rng` and renders it from `cameras` (sized to the
     /// last 3D scale's rendering; the upsampler doubles them when trained).
     pub fn sample(&self, rng: &mut impl rand::Rng, cameras: &[Camera]) -> Result<Sample> {

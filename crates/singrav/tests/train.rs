@@ -225,7 +225,7 @@ fn micro_run_has_finite_losses_pictures_and_a_sampleable_model() {
     let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), steps.len());
 
-    let cams = singrav::sample::showcase_cameras(2, model.render_size()).unwrap();
+    let cams = model.showcase_cameras(2).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let sample = model.sample(&mut rng, &cams).unwrap();
     let size = config.pyramid.volume_sizes[1];

@@ -76,7 +76,7 @@ impl Placement {
     /// twice its diagonal across, between their lowest and highest up and down) among the grid
     /// points at least half the photos frame; up and down the points' box bounds it (photos from
     /// around and above carve neither under the ground nor far above it). The scene is turned
-    /// about +z so that the hull's box is narrowest ([`narrowest_azimuth`]).
+    /// about +z so that the hull's box is narrowest (`narrowest_azimuth`).
     pub fn of_foreground(
         capture: &SparseCapture,
         foreground: &[Foreground],

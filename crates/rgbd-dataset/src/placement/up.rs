@@ -71,7 +71,7 @@ pub fn cameras_up(capture: &SparseCapture) -> Option<DVec3> {
 
 /// The dominant plane of the sparse points: its unit normal, turned towards the cameras'
 /// mean centre, and the share of points on it. Found by RANSAC (seeded, so the same capture
-/// gives the same plane) within [`PLANE_TOLERANCE`], then refitted by least squares to its
+/// gives the same plane) within `PLANE_TOLERANCE`, then refitted by least squares to its
 /// points. `None` with fewer than three points or no plane.
 pub fn ground_plane(capture: &SparseCapture) -> Option<(DVec3, f64)> {
     let points = &capture.points;
@@ -136,7 +136,7 @@ fn least_squares_normal(points: &[DVec3], mean: DVec3) -> Option<DVec3> {
 }
 
 /// The up direction `from` asks for, and what was used: the ground plane's normal when it is
-/// credible (at least [`MIN_GROUND_SHARE`] of the points, within [`MAX_TILT_FROM_CAMERAS_DEG`]
+/// credible (at least `MIN_GROUND_SHARE` of the points, within `MAX_TILT_FROM_CAMERAS_DEG`
 /// of the cameras' up), else the cameras' up. `None` when the cameras' up is undefined.
 pub fn up_direction(capture: &SparseCapture, from: UpFrom) -> Option<(DVec3, UpFrom)> {
     let cameras = cameras_up(capture)?;

@@ -380,11 +380,12 @@ mod tests {
                 geometric(volume as f64, 4.0 / 3.0, n),
                 "{name}"
             );
-            assert_eq!(
-                pyramid.image_sizes,
-                geometric(image as f64, 1.5, n),
-                "{name}"
-            );
+            // The paper's table ends its renderings at 160^2, where the ramp reaches 162.
+            let mut ramp = geometric(image as f64, 1.5, n);
+            if name == "paper" {
+                ramp[n - 1] = 160;
+            }
+            assert_eq!(pyramid.image_sizes, ramp, "{name}");
         }
         // `small`: `tiny`'s 16^3 first, then the 4/3 ramp from 24^3.
         let small = TrainConfig::preset("small").unwrap().pyramid;

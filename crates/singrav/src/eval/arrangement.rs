@@ -46,8 +46,8 @@ pub(super) struct Arrangement {
 pub struct ObjectCount {
     /// Objects no smaller than a fifth of the scene's median object.
     pub count: usize,
-    /// The same per kind of the scene's matter ([`ObjectCount::kinds`]' order in the
-    /// evaluation).
+    /// The same per kind of the scene's matter, in the order of the evaluation's
+    /// [`scene_metrics::MatterSupport::kinds`].
     pub by_kind: Vec<usize>,
     /// The largest object's share of all the volume's object matter (1: it all ran together).
     pub largest_share: f64,
