@@ -18,23 +18,8 @@ THREADS=${THREADS:-2}
 REPEAT=${REPEAT:-5}
 ROUNDS=${ROUNDS:-2}
 G=$(bash benches/standalone_gan_step.sh)
-BASE_ROWS=(
-  "generator --size 40 --channels 32 --layers 5"
-  "generator --size 71 --channels 32 --layers 5"
-  "critic --size 54 --batch 2 --channels 32 --layers 5"
-  "critic --size 108 --batch 2 --channels 32 --layers 5"
-)
-HD_ROWS=(
-  "active --size 95 --channels 16 --layers 5"
-  "active --size 126 --channels 16 --layers 5"
-  "critic --size 160 --batch 2 --channels 16 --layers 5"
-  "critic --size 320 --batch 2 --channels 16 --layers 5 --in-channels 6"
-)
-case "${ROWS:-all}" in
-  base) ROWS=("${BASE_ROWS[@]}") ;;
-  hd) ROWS=("${HD_ROWS[@]}") ;;
-  *) ROWS=("${BASE_ROWS[@]}" "${HD_ROWS[@]}") ;;
-esac
+# shellcheck source=benches/gan_rows.sh
+source benches/gan_rows.sh
 SETTINGS=(${SETTINGS:-none malloc spin candle1 join all})
 MALLOC="glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=1073741824"
 OUT=$(mktemp)
