@@ -49,7 +49,7 @@ enum Command {
     Fit(fit::FitArgs),
     /// Render a built-in scene into an RGB-D transforms.json dataset.
     Scene(scene::SceneArgs),
-    /// Turn a capture of your own photos (a COLMAP reconstruction) into a dataset.
+    /// Turn a capture of your own photos (a COLMAP reconstruction or a nerfstudio capture) into a dataset.
     Import(import::ImportArgs),
     /// Train SinGRAV on a transforms.json RGB-D dataset (progress bar, log, checkpoints).
     Train(train::TrainArgs),
@@ -63,9 +63,9 @@ enum Command {
     Edit(edit::EditArgs),
     /// Compose objects of several generated scenes into one and harmonise it with the generators.
     Compose(compose::ComposeArgs),
-    /// The whole pipeline: dataset of a built-in scene, tiny training, samples, pictures, VDB.
+    /// The whole pipeline: dataset of a built-in scene, training (`tiny`, or --preset), samples, pictures, VDB.
     Demo(demo::DemoArgs),
-    /// The paper's metrics of a trained model: Diversity-MV, and SIFID-MV with InceptionV3 weights.
+    /// Every quality number of a trained model: V*, patch and colour SWD, floaters, layout, objects, Diversity-MV, SIFID-MV.
     Eval(eval::EvalArgs),
     /// Check a device (a CUDA GPU) against the CPU and time training on it: one JSON line per check.
     DeviceCheck(device_check::DeviceCheckArgs),
