@@ -5,7 +5,7 @@
 //! judged by, [`scene_metrics`]'s; the direct fit it can compare with, [`volume_fit`]'s.
 //!
 //! - [`export`]: volumes for tools that interpolate physical density, on finer grids.
-//! - [`TrainConfig`]: presets (`paper`, `paper-island`, `hd`, `small`, `tiny`, `micro`) and ablation switches.
+//! - [`TrainConfig`]: the presets ([`TrainConfig::PRESETS`]) and ablation switches.
 //! - [`SinGrav`] ([`model`]): the pyramid of 3D generators and the 2D upsampler.
 //! - [`train::train`]: coarse-to-fine training with checkpoints, resume and a loss log.
 //! - [`eval::evaluate`]: every quality number of a trained model against its dataset.
