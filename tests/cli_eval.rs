@@ -243,6 +243,7 @@ fn eval_reports_diversity_and_with_weights_sifid() {
     assert_eq!(report["layout_reference"], "vstar");
     assert!(
         report["reconstruction_layout_distance"].is_null()
+            && report["reconstruction_layout_distance_by_position"].is_null()
             && report["reconstruction_misplaced_matter"].is_null(),
         "{report}"
     );
@@ -256,6 +257,14 @@ fn eval_reports_diversity_and_with_weights_sifid() {
     assert_eq!(report["layout_reference"], "fit");
     let v_star = report["reconstruction_layout_distance"].as_f64().unwrap();
     assert!(v_star >= 0.0 && v_star.is_finite(), "{report}");
+    let by_position = report["reconstruction_layout_distance_by_position"]
+        .as_f64()
+        .unwrap();
+    assert!(by_position >= 0.0 && by_position.is_finite(), "{report}");
+    assert!(
+        (number_after(&fitted, "reconstruction_position:") - by_position).abs() <= 5e-5,
+        "{fitted}"
+    );
     let v_star = report["reconstruction_misplaced_matter"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&v_star), "{report}");
     assert!((number_after(&fitted, "reconstruction_misplaced:") - v_star).abs() <= 5e-5);
@@ -397,12 +406,12 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
             .collect()
     };
     let (plain, holdout) = (cells(lines[2]), cells(lines[3]));
-    assert_eq!(plain.len(), 16, "{text}");
+    assert_eq!(plain.len(), 17, "{text}");
     assert_eq!(plain[0], path(&run));
     assert_eq!(holdout[0], path(&held));
     // No held-out views and no SIFID-MV in the plain run: dashes.
     assert_eq!(
-        (plain[5].as_str(), plain[6].as_str(), plain[15].as_str()),
+        (plain[5].as_str(), plain[6].as_str(), plain[16].as_str()),
         ("-", "-", "-")
     );
     assert_eq!(holdout[5], format!("{held_psnr:.2}"));
@@ -413,19 +422,29 @@ fn a_holdout_run_reports_held_out_views_and_several_runs_make_one_table() {
     // Two scenes leave too few for Diversity-MV's jackknife: its value alone.
     assert!(report["diversity_mv_stderr"].is_null(), "{report}");
     let diversity = report["diversity_mv"].as_f64().unwrap();
-    assert_eq!(holdout[14], format!("{diversity:.4}"));
+    assert_eq!(holdout[15], format!("{diversity:.4}"));
     // The layout distance, with its standard error.
     assert_eq!(report["layout_reference"], "vstar");
     let layout = report["layout_distance"].as_f64().unwrap();
     let layout_error = report["layout_distance_stderr"].as_f64().unwrap();
     assert!(layout > 0.0 && layout.is_finite(), "{report}");
     assert_eq!(holdout[10], format!("{layout:.4} ± {layout_error:.4}"));
+    // The same by position alone, beside it.
+    let by_position = report["layout_distance_by_position"].as_f64().unwrap();
+    let by_position_error = report["layout_distance_by_position_stderr"]
+        .as_f64()
+        .unwrap();
+    assert!(by_position > 0.0 && by_position.is_finite(), "{report}");
+    assert_eq!(
+        holdout[11],
+        format!("{by_position:.4} ± {by_position_error:.4}")
+    );
     // The share of matter out of place, a share of the volumes' matter, with its error.
     let misplaced = report["misplaced_matter"].as_f64().unwrap();
     let misplaced_error = report["misplaced_matter_stderr"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&misplaced), "{report}");
     assert_eq!(
-        holdout[11],
+        holdout[12],
         format!("{misplaced:.4} ± {misplaced_error:.4}")
     );
     // V*'s volume over the 4 training and, separately, the 2 held-out frames.
@@ -522,6 +541,7 @@ fn the_family_row_scores_other_layouts_and_vary_from_is_checked() {
         "colour_swd",
         "floaters",
         "layout_distance",
+        "layout_distance_by_position",
         "misplaced_matter",
         "diversity_mv",
     ] {
@@ -557,7 +577,7 @@ fn the_family_row_scores_other_layouts_and_vary_from_is_checked() {
         lines[4].starts_with("| family: 1 other layouts of `stones` | - |"),
         "{text}"
     );
-    assert_eq!(lines[4].matches('|').count(), 17, "{text}");
+    assert_eq!(lines[4].matches('|').count(), 18, "{text}");
 
     // A dataset that records no built-in scene has no family.
     record.as_object_mut().unwrap().remove("volgen_scene");

@@ -218,6 +218,9 @@ fn print_report(e: &Evaluation) {
     if let Some(v_star) = e.reconstruction_layout_distance {
         println!("reconstruction_layout:     {v_star:.4}  (V*'s own layout distance from the fit)");
     }
+    if let Some(v_star) = e.reconstruction_layout_distance_by_position {
+        println!("reconstruction_position:   {v_star:.4}  (the same by position alone)");
+    }
     if let Some(v_star) = e.reconstruction_misplaced_matter {
         println!("reconstruction_misplaced:  {v_star:.4}  (V*'s own matter out of place against the fit)");
     }
@@ -288,6 +291,14 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
         }
     );
     println!(
+        "layout_by_position:        {}  (the same by position alone: matter moved, not tinted)",
+        cell(
+            Some(e.layout_distance_by_position),
+            e.layout_distance_by_position_stderr,
+            4
+        )
+    );
+    println!(
         "misplaced_matter:          {}  (share of matter where the scene has none of its colour \
          nearby; lower = arrangement kept)",
         cell(Some(e.misplaced_matter), e.misplaced_matter_stderr, 4)
@@ -325,9 +336,9 @@ fn print_scores(e: &SceneScores, image_size: usize, layout_reference: &str) {
 fn markdown_table(evaluations: &[EvalFile], mean: bool) -> String {
     let mut table = String::from(
         "| run | PSNR (dB) | SSIM | depth RMSE | volume PSNR (dB) | held-out PSNR | held-out SSIM | \
-         patch SWD-MV | colour SWD | floaters | layout | misplaced | objects | largest object | \
-         Diversity-MV | SIFID-MV |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         patch SWD-MV | colour SWD | floaters | layout | layout by position | misplaced | objects | \
+         largest object | Diversity-MV | SIFID-MV |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for e in evaluations {
         let cells: Vec<String> = columns(&e.numbers)
@@ -398,12 +409,17 @@ fn columns(e: &Evaluation) -> Vec<Column> {
 }
 
 /// The sample metrics' columns of the table.
-fn sample_columns(e: &SceneScores) -> [Column; 9] {
+fn sample_columns(e: &SceneScores) -> [Column; 10] {
     [
         (e.patch_swd_mv, e.patch_swd_mv_stderr, 4),
         (Some(e.colour_swd), e.colour_swd_stderr, 4),
         (e.floaters, e.floaters_stderr, 4),
         (Some(e.layout_distance), e.layout_distance_stderr, 4),
+        (
+            Some(e.layout_distance_by_position),
+            e.layout_distance_by_position_stderr,
+            4,
+        ),
         (Some(e.misplaced_matter), e.misplaced_matter_stderr, 4),
         (Some(e.objects), e.objects_stderr, 2),
         (

@@ -262,6 +262,38 @@ pub fn layout_distance(
     sliced_w1(a, b, directions, seed, Slice::All)
 }
 
+/// [`layout_distance`] by position alone: the same sliced Wasserstein-1 distance over random
+/// unit directions of `(x, y, z)`, colours left out. Where it stays as the layout distance
+/// grows, two volumes' matter stands in the same places in other colours (a sample's tint, a
+/// blurred texture); where it grows too, the matter has moved.
+///
+/// ```
+/// use candle_core::{Device, Tensor};
+/// use scene_metrics::{layout_distance, layout_distance_by_position, LayoutPoints};
+/// // One dense voxel at either end of a 4-voxel row, red or grey.
+/// let voxel = |x: usize, grey: bool| {
+///     let mut v = vec![0f32; 4 * 4];
+///     v[x] = 50.0;
+///     for c in 1..4 { v[c * 4 + x] = if grey || c == 1 { 0.5 } else { 0.0 }; }
+///     LayoutPoints::from_volume(&Tensor::from_vec(v, (4, 1, 1, 4), &Device::Cpu)?, 0.5)
+/// };
+/// let (red, grey, moved) = (voxel(0, false)?, voxel(0, true)?, voxel(3, false)?);
+/// assert!(layout_distance(&red, &grey, 64, 0)? > 0.1);
+/// assert_eq!(layout_distance_by_position(&red, &grey, 64, 0)?, 0.0);
+/// // Moved by 1.5 along x: the mean over 3D directions of |1.5 d_x|, 1.5 / 2.
+/// let apart = layout_distance_by_position(&red, &moved, 4096, 0)?;
+/// assert!((apart - 0.75).abs() < 0.02, "{apart}");
+/// # Ok::<(), scene_metrics::Error>(())
+/// ```
+pub fn layout_distance_by_position(
+    a: &LayoutPoints,
+    b: &LayoutPoints,
+    directions: usize,
+    seed: u64,
+) -> Result<f64> {
+    sliced_w1(a, b, directions, seed, Slice::Position)
+}
+
 /// Which coordinates of the points a sliced distance projects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Slice {

@@ -14,7 +14,9 @@
 //! - [`colour_swd`]: colour drift, the sliced Wasserstein distance between RGB distributions.
 //! - [`floaters`]: the mean opacity generated scenes put where the real views are empty.
 //! - [`layout_distance`]: how far a generated volume's matter is from the scene's, in position
-//!   and colour (arrangement, which the image metrics cannot see); [`kind_layout_distance`]:
+//!   and colour (arrangement, which the image metrics cannot see), and
+//!   [`layout_distance_by_position`] in position alone (moved matter, not tinted matter);
+//!   [`kind_layout_distance`]:
 //!   the same by kind of matter ([`MatterKinds`]), each kind with an equal say;
 //!   [`MatterSupport::misplaced`]: the share of a volume's matter standing where the scene has
 //!   no matter of its kind nearby (matter out of place, which true variants of a scene avoid).
@@ -53,7 +55,9 @@ pub use estimate::Estimate;
 pub use floaters::{floaters, floaters_per_scene};
 pub use frechet::FeatureGaussian;
 pub use inception::InceptionBlock1;
-pub use layout::{layout_distance, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS};
+pub use layout::{
+    layout_distance, layout_distance_by_position, LayoutPoints, LayoutWeighting, LAYOUT_DIRECTIONS,
+};
 pub use matter_kinds::{kind_layout_distance, kind_layout_distances, MatterKinds, MATTER_KINDS};
 pub use misplaced::{MatterSupport, MISPLACED_KINDS, MISPLACED_REACH};
 pub use objects::{

@@ -1,13 +1,13 @@
 //! The generated volumes' arrangement against the scene's volume: how far their matter is
-//! from the scene's ([`layout_distance`]), how much of it stands where the scene has no
+//! from the scene's ([`layout_distance`], and [`layout_distance_by_position`]), how much of it stands where the scene has no
 //! matter of its kind nearby ([`MatterSupport::misplaced`]), both seen from above
 //! (docs/metrics.md, "layout_distance" and "misplaced_matter"), and the separate things they
 //! hold ([`Objects`], "objects").
 
 use radiance_volume::RadianceVolume;
 use scene_metrics::{
-    layout_distance, LayoutPoints, LayoutWeighting, MatterKinds, MatterSupport, ObjectRule,
-    Objects, LAYOUT_DIRECTIONS, MISPLACED_KINDS, MISPLACED_REACH,
+    layout_distance, layout_distance_by_position, LayoutPoints, LayoutWeighting, MatterKinds,
+    MatterSupport, ObjectRule, Objects, LAYOUT_DIRECTIONS, MISPLACED_KINDS, MISPLACED_REACH,
 };
 
 use crate::error::Result;
@@ -35,6 +35,8 @@ pub(super) struct SceneMatter {
 pub(super) struct Arrangement {
     /// Its [`layout_distance`] from the scene's matter.
     pub distance: f64,
+    /// The same by position alone ([`layout_distance_by_position`]).
+    pub position_distance: f64,
     /// The share of its matter standing out of place.
     pub misplaced: f64,
     /// Its objects, counted and sized as the scene's are.
@@ -97,8 +99,15 @@ impl SceneMatter {
     /// [`layout_distance`], and has none out of place).
     pub fn arrangement(&self, volume: &RadianceVolume) -> Result<Arrangement> {
         let points = layout_points(volume)?;
+        let (reference, seed) = (&self.points, ARRANGEMENT_SEED);
         Ok(Arrangement {
-            distance: layout_distance(&self.points, &points, LAYOUT_DIRECTIONS, ARRANGEMENT_SEED)?,
+            distance: layout_distance(reference, &points, LAYOUT_DIRECTIONS, seed)?,
+            position_distance: layout_distance_by_position(
+                reference,
+                &points,
+                LAYOUT_DIRECTIONS,
+                seed,
+            )?,
             misplaced: self.places.misplaced(&points),
             objects: self.objects(volume)?,
         })

@@ -161,6 +161,8 @@ pub struct Evaluation {
     pub samples: SceneScores,
     /// V*'s layout distance from the fit (None when V* is the reference).
     pub reconstruction_layout_distance: Option<f64>,
+    /// V*'s layout distance from the fit by position alone (None when V* is the reference).
+    pub reconstruction_layout_distance_by_position: Option<f64>,
     /// V*'s share of matter out of place against the fit (None when V* is the reference).
     pub reconstruction_misplaced_matter: Option<f64>,
     /// What the layout distances are measured against: `fit` (a direct fit of the training
@@ -331,6 +333,9 @@ pub fn evaluate(
         vary_from: config.vary_from,
         samples,
         reconstruction_layout_distance: reconstruction_arrangement.as_ref().map(|a| a.distance),
+        reconstruction_layout_distance_by_position: reconstruction_arrangement
+            .as_ref()
+            .map(|a| a.position_distance),
         reconstruction_misplaced_matter: reconstruction_arrangement.as_ref().map(|a| a.misplaced),
         layout_reference: match config.layout_reference {
             LayoutReference::Fit => "fit".into(),

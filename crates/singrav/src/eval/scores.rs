@@ -19,6 +19,8 @@ pub(super) struct SeenScenes {
     pub opacity: Vec<Tensor>,
     /// Layout distances from the scene's volume.
     pub layouts: Vec<f64>,
+    /// The same by position alone.
+    pub position_layouts: Vec<f64>,
     /// Shares of matter out of place against the scene's volume.
     pub misplaced: Vec<f64>,
     /// Their objects.
@@ -31,6 +33,7 @@ impl SeenScenes {
             views: Vec::with_capacity(scenes),
             opacity: Vec::with_capacity(scenes),
             layouts: Vec::with_capacity(scenes),
+            position_layouts: Vec::with_capacity(scenes),
             misplaced: Vec::with_capacity(scenes),
             objects: Vec::with_capacity(scenes),
         }
@@ -39,6 +42,7 @@ impl SeenScenes {
     /// Records the next scene's arrangement.
     pub fn push_arrangement(&mut self, arrangement: Arrangement) {
         self.layouts.push(arrangement.distance);
+        self.position_layouts.push(arrangement.position_distance);
         self.misplaced.push(arrangement.misplaced);
         self.objects.push(arrangement.objects);
     }
@@ -75,6 +79,13 @@ pub struct SceneScores {
     pub layout_distance: f64,
     /// Its standard error over scenes.
     pub layout_distance_stderr: Option<f64>,
+    /// The mean layout distance by position alone
+    /// ([`layout_distance_by_position`](scene_metrics::layout_distance_by_position)): where
+    /// `layout_distance` is high and this is not, the matter stands in the scene's places in
+    /// other colours.
+    pub layout_distance_by_position: f64,
+    /// Its standard error over scenes.
+    pub layout_distance_by_position_stderr: Option<f64>,
     /// The volumes' mean share of matter out of place against the evaluation's reference
     /// volume ([`MatterSupport::misplaced`](scene_metrics::MatterSupport::misplaced)): matter
     /// standing where the scene has none of its colour nearby; lower keeps the arrangement.
@@ -112,6 +123,7 @@ impl SceneScores {
             .transpose()?;
         let colour = mean_and_error(&colour_swd_per_scene(&seen.views, real)?)?;
         let layout = mean_and_error(&seen.layouts)?;
+        let position_layout = mean_and_error(&seen.position_layouts)?;
         let misplaced = mean_and_error(&seen.misplaced)?;
         let counts: Vec<f64> = seen.objects.iter().map(|o| o.count as f64).collect();
         let objects = mean_and_error(&counts)?;
@@ -152,6 +164,8 @@ impl SceneScores {
                 .transpose()?,
             layout_distance: layout.0,
             layout_distance_stderr: layout.1,
+            layout_distance_by_position: position_layout.0,
+            layout_distance_by_position_stderr: position_layout.1,
             misplaced_matter: misplaced.0,
             misplaced_matter_stderr: misplaced.1,
             objects: objects.0,
