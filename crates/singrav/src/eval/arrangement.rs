@@ -1,9 +1,8 @@
 //! The generated volumes' arrangement against the scene's volume: how far their matter is
 //! from the scene's ([`layout_distance`], and [`layout_distance_by_position`]), how much of it
 //! stands where the scene has no matter of its kind nearby ([`MatterSupport::misplaced`]), both
-//! seen from above
-//! (docs/metrics.md, "layout_distance" and "misplaced_matter"), and the separate things they
-//! hold ([`Objects`], "objects").
+//! seen from above (docs/metrics.md, "layout_distance" and "misplaced_matter"), and the
+//! separate things they hold ([`Objects`], "objects").
 
 use radiance_volume::RadianceVolume;
 use scene_metrics::{
