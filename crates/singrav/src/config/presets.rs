@@ -228,9 +228,9 @@ fn hd() -> TrainConfig {
     hd.pyramid.fit_size = Some(45);
     // As many pixels as two of its finest renderings: 8 views of them would hold 204,800.
     hd.schedule.reconstruction_pixels = Some(2 * 160 * 160);
-    // Matches the samples' tints to the views': the stones grey, not purple, and so a layout
-    // distance 0.83x hd's without it over three seeds (the binary-opacity prior stays off: at
-    // this size it joins neighbouring stones).
+    // Matches the samples' tints to the views': greyer stones, and so a layout distance 0.83x
+    // hd's without it over three seeds (the binary-opacity prior stays off: at this size it
+    // joins neighbouring stones).
     hd.losses.chroma_distribution = 100.0;
     hd
 }
