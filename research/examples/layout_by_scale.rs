@@ -1,11 +1,12 @@
 //! At which scale a run's generated scenes leave the scene's layout: 16 scenes drawn as `volgen
 //! eval` draws them, each generated up to every 3D scale in turn from the same noise, scored by
 //! the layout distance and the layout distance by position (matter seen from above, against a
-//! fit of the dataset's views at the finest 3D scale's size, as `volgen eval` scores them),
-//! beside the reconstruction V* up to the same scale. Used for docs/journal/2026-12-hd.md
-//! (issue 82: seed 2's layout).
+//! fit of the dataset's views, as `volgen eval` scores them), beside the reconstruction V* up to
+//! the same scale. Used for docs/journal/2026-12-hd.md (issue 82: seed 2's layout).
 //!
-//! `cargo run --release -p research --example layout_by_scale -- DATASET RUN`
+//! `cargo run --release -p research --example layout_by_scale -- DATASET RUN [FIT]`: the fit at
+//! FIT^3 (default: the finest 3D scale's size, as `volgen eval` fits it; at `hd`'s 126^3 its
+//! matter makes every distance several times slower than at the run's own fit size, 45).
 
 use candle_core::Device;
 use rand::SeedableRng;
@@ -18,14 +19,24 @@ const SCENES: usize = 16;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [dataset, run] = args.as_slice() else {
-        panic!("usage: layout_by_scale DATASET RUN");
+    let (dataset, run, fit_size) = match args.as_slice() {
+        [dataset, run] => (dataset, run, None),
+        [dataset, run, size] => (
+            dataset,
+            run,
+            Some(size.parse().expect("FIT: a volume edge")),
+        ),
+        _ => panic!("usage: layout_by_scale DATASET RUN [FIT]"),
     };
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
-    // At the finest 3D scale, as `volgen eval` fits it, whatever size the run's own fit had.
-    let at_finest = model.config().clone().with(|c| c.pyramid.fit_size = None);
-    let reference = seen_points(&fit_of_views(&at_finest, &data));
+    // Without FIT at the finest 3D scale, as `volgen eval` fits it, whatever size the run's own
+    // fit had.
+    let config = model
+        .config()
+        .clone()
+        .with(|c| c.pyramid.fit_size = fit_size);
+    let reference = seen_points(&fit_of_views(&config, &data));
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     let scales = model.volume_scales();
     let noises: Vec<_> = (0..SCENES)
