@@ -30,8 +30,8 @@ fn main() {
     };
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
-    // Without FIT at the finest 3D scale, as `volgen eval` fits it, whatever size the run's own
-    // fit had.
+    // `fit_of_views` fits at the run's own fit size; without FIT at the finest 3D scale instead,
+    // as `volgen eval` fits it.
     let config = model
         .config()
         .clone()

@@ -130,8 +130,10 @@ fn columns_between(
     volume.with_tensor(tensor).unwrap()
 }
 
-/// The reference `volgen eval` scores layouts against: a direct fit of the dataset's views,
-/// made as training makes the 3D critic's, with the run's configuration.
+/// A direct fit of the dataset's views, made as training makes the 3D critic's, with `config`.
+/// `volgen eval` scores layouts against this fit at the finest 3D scale's size: the same volume
+/// for a run whose `pyramid.fit_size` is unset, a coarser one for `hd` (45^3) unless the caller
+/// clears it (as `layout_by_scale` does by default).
 pub fn fit_of_views(
     config: &singrav::TrainConfig,
     data: &rgbd_dataset::Dataset,
