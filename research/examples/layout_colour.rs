@@ -1,7 +1,7 @@
 //! Where the colour share of the layout distance comes from: for a run's generated scenes, its
 //! V* and true other layouts of the dataset's built-in scene, each against a fit of the views at
-//! the finest 3D scale (as `volgen eval` scores them), the layout distance split three ways, and
-//! the colour of the matter seen from above. Used for docs/journal/2026-12-hd.md (issue 82).
+//! the finest 3D scale (as `volgen eval` scores them), the layout distance taken apart, and the
+//! colour of the matter seen from above. Used for docs/journal/2026-12-hd.md (issue 82).
 //!
 //! `cargo run --release -p research --example layout_colour -- RUN DATASET [SCENES] [LAYOUTS]`
 //! (defaults 8 and 8). Columns:
@@ -21,7 +21,9 @@
 //!   ground's colour averaged over 16 x 16 voxel blocks taken from the fit (the volume keeps its
 //!   own finer pattern), or only the finer pattern (the volume keeps its own block means);
 //! - mean colour and its standard deviation per channel, and the mean absolute difference
-//!   between a voxel's colour and its column's (weighted as the matter seen from above).
+//!   between a voxel's colour and its column's (weighted as the matter seen from above);
+//! - under each row, the share of the matter seen from above per height band 0.1 high and the
+//!   band's mean colour.
 
 use candle_core::{Device, Tensor};
 use radiance_volume::{GridDims, RadianceVolume};
