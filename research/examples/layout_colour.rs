@@ -4,7 +4,8 @@
 //! colour of the matter seen from above. Used for docs/journal/2026-12-hd.md (issue 82).
 //!
 //! `cargo run --release -p research --example layout_colour -- RUN DATASET [SCENES] [LAYOUTS]`
-//! (defaults 8 and 8). Columns:
+//! (defaults 8, 8 and 1; with VARY_FROM K > 1 the scenes keep V*'s noise at the scales before
+//! K, as `volgen eval --vary-from K` draws them). Columns:
 //!
 //! - layout: `volgen eval`'s layout distance (6D, matter seen from above);
 //! - by position: the same over `(x, y, z)` directions only;
@@ -265,10 +266,10 @@ fn band_stats(m: &SeenMatter) -> Vec<[f64; 4]> {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: layout_colour RUN DATASET [SCENES] [LAYOUTS]";
+    let usage = "usage: layout_colour RUN DATASET [SCENES] [LAYOUTS] [VARY_FROM]";
     let (run, dataset) = (args.first().expect(usage), args.get(1).expect(usage));
     let arg = |i: usize, default: usize| args.get(i).map_or(default, |a| a.parse().unwrap());
-    let (scenes, layouts) = (arg(2, 8), arg(3, 8));
+    let (scenes, layouts, vary_from) = (arg(2, 8), arg(3, 8), arg(4, 1));
     let (model, _) = SinGrav::load(run.as_ref(), &Device::Cpu).unwrap();
     let data = Dataset::load(dataset.as_ref(), model.config().rendering.background).unwrap();
     let config = model.config().clone().with(|c| c.pyramid.fit_size = None);
@@ -388,7 +389,7 @@ fn main() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let samples: Vec<Vec<f64>> = (0..scenes)
         .map(|_| {
-            let raw = model.generate_random(&mut rng).unwrap();
+            let raw = model.generate_random_from(&mut rng, vary_from).unwrap();
             score(&model.to_physical(&raw).unwrap())
         })
         .collect();
