@@ -103,9 +103,8 @@ const BLOCK: usize = 16;
 
 /// Per voxel of the ground's band, the mean colour over its layer's `BLOCK x BLOCK` block of
 /// voxels, weighted by the matter seen from above (the voxel's own colour where the block holds
-/// none): the ground's slow colour changes without its fine pattern.
-fn ground_blocks(volume: &RadianceVolume) -> Vec<[f32; 3]> {
-    let matter = seen_matter(volume);
+/// none): the ground's slow colour changes without its fine pattern. `matter` is `volume`'s.
+fn ground_blocks(volume: &RadianceVolume, matter: &SeenMatter) -> Vec<[f32; 3]> {
     let [w, h, d] = volume.dims().xyz();
     let mut blocks = vec![[0f32; 3]; w * h * d];
     for z in 0..d {
@@ -286,11 +285,12 @@ fn main() {
             v.map(|x| x / n)
         })
         .collect();
-    let fit_blocks = ground_blocks(&fit);
-    let fit_colours: Vec<[f32; 3]> = {
-        let m = seen_matter(&fit);
-        m.colours.iter().map(|c| c.map(|v| v as f32)).collect()
-    };
+    let fit_blocks = ground_blocks(&fit, &reference_matter);
+    let fit_colours: Vec<[f32; 3]> = reference_matter
+        .colours
+        .iter()
+        .map(|c| c.map(|v| v as f32))
+        .collect();
     let score = |volume: &RadianceVolume| -> Vec<f64> {
         let points = seen_points(volume);
         let matter = seen_matter(volume);
@@ -311,7 +311,7 @@ fn main() {
         ];
         // The fit's slow ground colours with the volume's own fine pattern, and the volume's
         // slow colours with the fit's fine pattern.
-        let own_blocks = ground_blocks(volume);
+        let own_blocks = ground_blocks(volume, &matter);
         let slow_from_fit = with_ground_colour(volume, |cell, own| {
             [0, 1, 2].map(|k| own[k] - own_blocks[cell][k] + fit_blocks[cell][k])
         });
