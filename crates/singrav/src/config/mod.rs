@@ -164,6 +164,13 @@ pub struct Losses {
     /// the pixels' chroma (RGB projected onto the plane orthogonal to grey), so a tint is
     /// matched against the real view's tints and not hidden among its brightnesses.
     pub chroma_distribution: f64,
+    /// The cells per side of the grid over each view that the colour and chroma distributions
+    /// compare cell by cell (the mean over the cells), where `None` compares whole views. A
+    /// whole view's colours may stand anywhere in it; with a grid, a sample's colours must stand
+    /// in the same part of the view as the real view's, so a scene's colour patches (a dry band
+    /// across its ground) keep their places while objects still move within a cell.
+    #[serde(default)]
+    pub colour_grid: Option<usize>,
     /// Height profile of generated scenes at the 3D scales: the squared difference between the
     /// mean opacity of each pixel row of a sample's rendering and of the real view's alpha from
     /// the same camera (matter may move sideways, not up into the sky). Needs
@@ -206,6 +213,7 @@ impl Losses {
             swd_features: _,
             colour_distribution,
             chroma_distribution,
+            colour_grid: _,
             height_profile,
             opacity_binary,
             fitted,

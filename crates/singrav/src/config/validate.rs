@@ -179,6 +179,19 @@ impl TrainConfig {
                 ));
             }
         }
+        if let Some(grid) = losses.colour_grid {
+            // Image sizes are checked before the losses, so the smallest exists.
+            let smallest = self.pyramid.image_sizes.iter().copied().min().unwrap_or(0);
+            if !(1..=smallest).contains(&grid) {
+                return Err(invalid(
+                    "losses.colour_grid",
+                    format!(
+                        "expected cells per side from 1 to the smallest rendering's {smallest} \
+                         pixels (every cell needs a pixel), got {grid}"
+                    ),
+                ));
+            }
+        }
         let volume_scales = self.scales() - 1;
         if let Some(last) = self.critics.volume_until_scale {
             if !(1..=volume_scales).contains(&last) {
@@ -326,6 +339,8 @@ mod tests {
             ("run.holdout", "1"),
             ("critics.volume_until_scale", "0"),
             ("critics.volume_until_scale", "3"),
+            ("losses.colour_grid", "0"),
+            ("losses.colour_grid", "100"),
         ] {
             let err = micro
                 .clone()

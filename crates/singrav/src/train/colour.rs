@@ -5,7 +5,9 @@
 //! samples of the stones scene kept blue and purple stones on grey-stone views. This term
 //! compares the two views' pixel colours as point sets in RGB, by the sliced Wasserstein
 //! distance (squared W2 along random directions), which is indifferent to where the colours
-//! are, so it constrains colours, not the layout a sample may vary.
+//! are, so it constrains colours, not the layout a sample may vary. With a grid
+//! (`losses.colour_grid`) the views are compared cell by cell, so colours may move within a
+//! cell but not across the view: a scene's colour patches keep their places.
 //!
 //! In RGB a pixel's brightness spreads far more than its tint (white sky, dark stones), so a
 //! random direction mostly sorts the pixels by brightness and a tint of a few stones costs
@@ -22,26 +24,29 @@ use crate::error::Result;
 const DIRECTIONS: usize = 16;
 
 /// The mean over views of the squared sliced W2 distance between the pixel colours of
-/// `generated` and `real` (both `(V, 3, h, w)`), along directions drawn from `rng`.
+/// `generated` and `real` (both `(V, 3, h, w)`), along directions drawn from `rng`, per cell of
+/// a `grid` x `grid` division of each view.
 pub(super) fn colour_distribution_loss(
     generated: &Tensor,
     real: &Tensor,
+    grid: usize,
     rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Result<Tensor> {
-    pixel_distribution_distance(generated, real, || {
+    pixel_distribution_distance(generated, real, grid, || {
         Ok(Projections::random(3, DIRECTIONS, rng, generated.device())?)
     })
 }
 
 /// The mean over views of the squared sliced W2 distance between the pixel chroma of
 /// `generated` and `real` (both `(V, 3, h, w)` RGB), along directions in the chroma plane drawn
-/// from `rng`.
+/// from `rng`, per cell of a `grid` x `grid` division of each view.
 pub(super) fn chroma_distribution_loss(
     generated: &Tensor,
     real: &Tensor,
+    grid: usize,
     rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Result<Tensor> {
-    pixel_distribution_distance(&chroma(generated)?, &chroma(real)?, || {
+    pixel_distribution_distance(&chroma(generated)?, &chroma(real)?, grid, || {
         Ok(Projections::random(2, DIRECTIONS, rng, generated.device())?)
     })
 }
@@ -57,29 +62,43 @@ fn chroma(images: &Tensor) -> Result<Tensor> {
     Ok(Tensor::cat(&[red_green, yellow_blue], 1)?)
 }
 
-/// The mean over views of the squared sliced W2 distance between the pixels of `generated`
-/// and `real` (both `(V, C, h, w)`) as point sets in C dimensions, along the directions
-/// `directions` gives for each view in turn.
-pub(super) fn pixel_distribution_distance(
+/// The mean over views, and over the cells of a `grid` x `grid` division of each view, of the
+/// squared sliced W2 distance between the pixels of `generated` and `real` (both
+/// `(V, C, h, w)`) as point sets in C dimensions, along the directions `directions` gives for
+/// each view in turn (every cell of a view shares them). Cell `(i, j)` holds the rows
+/// `[i h / grid, (i + 1) h / grid)` and the columns likewise; `grid` is at most `h` and `w`.
+fn pixel_distribution_distance(
     generated: &Tensor,
     real: &Tensor,
+    grid: usize,
     mut directions: impl FnMut() -> Result<Projections>,
 ) -> Result<Tensor> {
-    let views = generated.dim(0)?;
-    let pixels = |images: &Tensor, v: usize| -> Result<Tensor> {
-        // (C, h, w) -> (h w, C): one point per pixel.
-        Ok(images.get(v)?.flatten_from(1)?.t()?.contiguous()?)
+    let (views, _, height, width) = generated.dims4()?;
+    let span = |cell: usize, size: usize| (cell * size / grid, (cell + 1) * size / grid);
+    let pixels = |images: &Tensor, v: usize, i: usize, j: usize| -> Result<Tensor> {
+        let ((top, bottom), (left, right)) = (span(i, height), span(j, width));
+        let cell = images
+            .get(v)?
+            .narrow(1, top, bottom - top)?
+            .narrow(2, left, right - left)?;
+        // (C, rows, columns) -> (rows columns, C): one point per pixel.
+        Ok(cell.flatten_from(1)?.t()?.contiguous()?)
     };
-    let mut per_view = Vec::with_capacity(views);
+    let mut per_cell = Vec::with_capacity(views * grid * grid);
     for v in 0..views {
-        per_view.push(sliced_wasserstein(
-            &pixels(generated, v)?,
-            &pixels(real, v)?,
-            &directions()?,
-            Metric::SquaredW2,
-        )?);
+        let along = directions()?;
+        for i in 0..grid {
+            for j in 0..grid {
+                per_cell.push(sliced_wasserstein(
+                    &pixels(generated, v, i, j)?,
+                    &pixels(real, v, i, j)?,
+                    &along,
+                    Metric::SquaredW2,
+                )?);
+            }
+        }
     }
-    Ok(Tensor::stack(&per_view, 0)?.mean(0)?)
+    Ok(Tensor::stack(&per_cell, 0)?.mean(0)?)
 }
 
 #[cfg(test)]
@@ -95,14 +114,14 @@ mod tests {
         let real = Tensor::rand(0f32, 1f32, (2, 3, 4, 5), &Device::Cpu).unwrap();
         // The same pixels in another order: the same colours, another layout.
         let flipped = real.flip(&[2, 3]).unwrap();
-        let same = colour_distribution_loss(&flipped, &real, &mut rng).unwrap();
+        let same = colour_distribution_loss(&flipped, &real, 1, &mut rng).unwrap();
         assert!(same.to_scalar::<f32>().unwrap().abs() < 1e-10);
         // A constant shift s moves every pixel's projection on u by s . u, so each direction
         // costs (s . u)^2: the loss is their mean over the directions drawn.
         let shift = 0.1f32;
         let tinted = (&real + f64::from(shift)).unwrap();
         let mut seeded = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let loss = colour_distribution_loss(&tinted, &real, &mut seeded)
+        let loss = colour_distribution_loss(&tinted, &real, 1, &mut seeded)
             .unwrap()
             .to_scalar::<f32>()
             .unwrap();
@@ -126,12 +145,78 @@ mod tests {
     }
 
     #[test]
+    fn a_grid_charges_colours_that_changed_sides_and_keeps_what_stays_in_its_cell() {
+        // One 2 x 4 view: its left half colour a, its right half colour b; the sample has them
+        // the other way round.
+        let (a, b) = ([0.2f32, 0.6, 0.1], [0.5f32, 0.4, 0.3]);
+        let view = |left: [f32; 3], right: [f32; 3]| {
+            let mut values = Vec::with_capacity(24);
+            for c in 0..3 {
+                for _row in 0..2 {
+                    values.extend([left[c], left[c], right[c], right[c]]);
+                }
+            }
+            Tensor::from_vec(values, (1, 3, 2, 4), &Device::Cpu).unwrap()
+        };
+        let (real, swapped) = (view(a, b), view(b, a));
+        let loss = |generated: &Tensor, grid: usize| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+            colour_distribution_loss(generated, &real, grid, &mut rng)
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap()
+        };
+        // The whole view holds the same colours either way.
+        assert!(loss(&swapped, 1).abs() < 1e-10);
+        // Each of the four 1 x 2 cells holds b where the real one holds a (or the reverse): each
+        // direction u costs ((a - b) . u)^2 in every cell.
+        let mut again = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let p =
+            swd_loss::Projections::random(3, super::DIRECTIONS, &mut again, &Device::Cpu).unwrap();
+        let u: Vec<Vec<f64>> = p
+            .as_tensor()
+            .to_dtype(candle_core::DType::F64)
+            .unwrap()
+            .to_vec2()
+            .unwrap();
+        // Row c of the (3, K) matrix holds component c of every direction.
+        let difference: Vec<f64> = (0..3).map(|c| f64::from(a[c] - b[c])).collect();
+        let mut expected = 0.0f64;
+        for ((u0, u1), u2) in u[0].iter().zip(&u[1]).zip(&u[2]) {
+            let along = difference[0] * u0 + difference[1] * u1 + difference[2] * u2;
+            expected += along * along;
+        }
+        expected /= super::DIRECTIONS as f64;
+        assert!(expected > 1e-3);
+        let gridded = f64::from(loss(&swapped, 2));
+        assert!(
+            (gridded - expected).abs() < 1e-5 * (1.0 + expected),
+            "{gridded} against {expected}"
+        );
+        // Pixels moved within their cells cost nothing; moved across cells, they do.
+        let noise = Tensor::rand(0f32, 1f32, (1, 3, 4, 4), &Device::Cpu).unwrap();
+        let columns = |order: [u32; 4]| {
+            let order = Tensor::new(&order, &Device::Cpu).unwrap();
+            noise.index_select(&order, 3).unwrap()
+        };
+        let against_noise = |generated: &Tensor| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+            colour_distribution_loss(generated, &noise, 2, &mut rng)
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap()
+        };
+        assert!(against_noise(&columns([1, 0, 3, 2])).abs() < 1e-10);
+        assert!(against_noise(&columns([3, 2, 1, 0])) > 1e-4);
+    }
+
+    #[test]
     fn chroma_ignores_grey_and_a_tint_costs_its_chroma_length_projected() {
         let real = Tensor::rand(0f32, 1f32, (2, 3, 4, 5), &Device::Cpu).unwrap();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         // A grey added to every channel is brightness only.
         let brighter = (&real + 0.2).unwrap();
-        let loss = chroma_distribution_loss(&brighter, &real, &mut rng).unwrap();
+        let loss = chroma_distribution_loss(&brighter, &real, 1, &mut rng).unwrap();
         assert!(loss.to_scalar::<f32>().unwrap().abs() < 1e-10);
         // A tint t = (0.1, 0, 0.1): chroma coordinates (0.1 / sqrt 2, -0.1 / sqrt 6) (hand
         // projected on the basis), so each direction u costs (c . u)^2.
@@ -141,7 +226,7 @@ mod tests {
             .unwrap();
         let tinted = real.broadcast_add(&tint).unwrap();
         let mut seeded = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        let loss = chroma_distribution_loss(&tinted, &real, &mut seeded)
+        let loss = chroma_distribution_loss(&tinted, &real, 1, &mut seeded)
             .unwrap()
             .to_scalar::<f32>()
             .unwrap();

@@ -27,7 +27,7 @@ type OpacityLoss = fn(&Tensor, &Tensor) -> Result<Tensor>;
 
 /// A loss on the samples' rendered colours against the real views' (both `(V, 3, h, w)`), with
 /// random directions drawn from the generator.
-type ColourLoss = fn(&Tensor, &Tensor, &mut rand_chacha::ChaCha8Rng) -> Result<Tensor>;
+type ColourLoss = fn(&Tensor, &Tensor, usize, &mut rand_chacha::ChaCha8Rng) -> Result<Tensor>;
 
 /// One iteration's random draw: the noise of this scale and the volume of the frozen scales
 /// below it. As in SinGAN, noise is drawn once per iteration: the critic steps see the same
@@ -378,9 +378,10 @@ impl<'a> VolumeScale<'a> {
         if colour_terms.iter().any(|(_, weight, _)| *weight > 0.0) {
             let colour = fake.narrow(1, 0, 3)?;
             let real = select(&self.level.images, &fake_views)?;
+            let grid = losses.colour_grid.unwrap_or(1);
             for (term, weight, loss) in colour_terms {
                 if weight > 0.0 {
-                    terms.add(term, (loss(&colour, &real, rng)? * weight)?);
+                    terms.add(term, (loss(&colour, &real, grid, rng)? * weight)?);
                 }
             }
         }
