@@ -108,6 +108,18 @@ mod tests {
 
     use super::{chroma_distribution_loss, colour_distribution_loss};
 
+    /// The directions the losses draw next from `rng` in `dims` dimensions, as the `(dims, K)`
+    /// matrix's rows in f64: row c holds component c of every direction.
+    fn directions(dims: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<Vec<f64>> {
+        swd_loss::Projections::random(dims, super::DIRECTIONS, rng, &Device::Cpu)
+            .unwrap()
+            .as_tensor()
+            .to_dtype(candle_core::DType::F64)
+            .unwrap()
+            .to_vec2()
+            .unwrap()
+    }
+
     #[test]
     fn a_constant_shift_costs_its_squared_length_projected_and_a_permutation_nothing() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
@@ -171,14 +183,7 @@ mod tests {
         // Each of the four 1 x 2 cells holds b where the real one holds a (or the reverse): each
         // direction u costs ((a - b) . u)^2 in every cell.
         let mut again = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let p =
-            swd_loss::Projections::random(3, super::DIRECTIONS, &mut again, &Device::Cpu).unwrap();
-        let u: Vec<Vec<f64>> = p
-            .as_tensor()
-            .to_dtype(candle_core::DType::F64)
-            .unwrap()
-            .to_vec2()
-            .unwrap();
+        let u = directions(3, &mut again);
         // Row c of the (3, K) matrix holds component c of every direction.
         let difference: Vec<f64> = (0..3).map(|c| f64::from(a[c] - b[c])).collect();
         let mut expected = 0.0f64;
@@ -234,14 +239,7 @@ mod tests {
         let mut again = rand_chacha::ChaCha8Rng::seed_from_u64(9);
         let mut expected = 0.0f64;
         for _ in 0..2 {
-            let p = swd_loss::Projections::random(2, super::DIRECTIONS, &mut again, &Device::Cpu)
-                .unwrap();
-            let u: Vec<Vec<f64>> = p
-                .as_tensor()
-                .to_dtype(candle_core::DType::F64)
-                .unwrap()
-                .to_vec2()
-                .unwrap();
+            let u = directions(2, &mut again);
             for (u0, u1) in u[0].iter().zip(&u[1]) {
                 let along = c[0] * u0 + c[1] * u1;
                 expected += along * along;
