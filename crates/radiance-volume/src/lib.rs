@@ -35,6 +35,7 @@ pub mod io;
 mod mask;
 mod occupancy;
 mod resample;
+mod resample_op;
 pub mod sample;
 mod source;
 mod volume;
