@@ -11,14 +11,10 @@
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
+use research::objects;
 use rgbd_dataset::Dataset;
-use scene_metrics::{ObjectRule, Objects};
+use scene_metrics::Objects;
 use singrav::SinGrav;
-
-fn objects(volume: &RadianceVolume) -> Objects {
-    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
-    Objects::of(volume.tensor(), voxel, &ObjectRule::default()).unwrap()
-}
 
 fn describe(name: &str, found: &Objects, min_volume: f64) {
     let sizes: Vec<String> = found

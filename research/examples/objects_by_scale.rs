@@ -7,16 +7,12 @@
 //! `cargo run --release -p research --example objects_by_scale -- RUN DATASET SAMPLE[,SAMPLE..]`
 
 use candle_core::Device;
-use radiance_volume::{GridDims, RadianceVolume};
+use radiance_volume::GridDims;
 use rand::SeedableRng;
+use research::objects;
 use rgbd_dataset::Dataset;
-use scene_metrics::{ObjectRule, Objects};
+use scene_metrics::Objects;
 use singrav::SinGrav;
-
-fn objects(volume: &RadianceVolume) -> Objects {
-    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
-    Objects::of(volume.tensor(), voxel, &ObjectRule::default()).unwrap()
-}
 
 /// Objects at least `min_volume`, the largest share and the three largest volumes (1e-3 box).
 fn describe(found: &Objects, min_volume: f64) -> String {

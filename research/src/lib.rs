@@ -40,6 +40,18 @@ pub fn stone_shares(volume: &radiance_volume::RadianceVolume) -> (f64, f64) {
     (inside / total.max(1e-12), ring / total.max(1e-12))
 }
 
+/// The objects (`scene_metrics::Objects`, the default rule) of a physical volume, with its
+/// voxel edge in box units: what `object_counts` and `objects_by_scale` count.
+pub fn objects(volume: &radiance_volume::RadianceVolume) -> scene_metrics::Objects {
+    let voxel = volume.aabb().size().x / volume.dims().xyz()[0] as f32;
+    scene_metrics::Objects::of(
+        volume.tensor(),
+        voxel,
+        &scene_metrics::ObjectRule::default(),
+    )
+    .unwrap()
+}
+
 /// The mean and the (population) standard deviation of `values`.
 pub fn mean_and_sd(values: &[f64]) -> (f64, f64) {
     let mean = values.iter().sum::<f64>() / values.len() as f64;
