@@ -11,24 +11,18 @@
 use candle_core::Device;
 use radiance_volume::{GridDims, RadianceVolume};
 use rand::SeedableRng;
-use research::objects;
+use research::{crumb_volume, largest_volumes, objects};
 use rgbd_dataset::Dataset;
 use scene_metrics::Objects;
 use singrav::SinGrav;
 
 fn describe(name: &str, found: &Objects, min_volume: f64) {
-    let sizes: Vec<String> = found
-        .all()
-        .iter()
-        .take(14)
-        .map(|o| format!("{:.2}", o.volume * 1e3))
-        .collect();
     println!(
         "{name:>14}: {:>3} objects ({:>3} with crumbs), largest share {:.3}; volumes (1e-3 box) {}",
         found.count(min_volume),
         found.count(0.0),
         found.largest_share(),
-        sizes.join(" ")
+        largest_volumes(found, 14)
     );
 }
 
@@ -55,11 +49,7 @@ fn main() {
         }
         objects(&scene.to_volume(GridDims::cube(finest)).unwrap())
     });
-    // Crumbs: objects below a fifth of the truth's median object.
-    let min_volume = truth
-        .as_ref()
-        .and_then(|t| t.median_volume(0.0))
-        .map_or(0.0, |m| 0.2 * m);
+    let min_volume = crumb_volume(truth.as_ref());
     println!("min volume {:.3}e-3 of the box", min_volume * 1e3);
     let fitted = std::path::Path::new(run).join("fitted.safetensors");
     if fitted.exists() {

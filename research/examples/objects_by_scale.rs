@@ -9,24 +9,18 @@
 use candle_core::Device;
 use radiance_volume::GridDims;
 use rand::SeedableRng;
-use research::objects;
+use research::{crumb_volume, largest_volumes, objects};
 use rgbd_dataset::Dataset;
 use scene_metrics::Objects;
 use singrav::SinGrav;
 
 /// Objects at least `min_volume`, the largest share and the three largest volumes (1e-3 box).
 fn describe(found: &Objects, min_volume: f64) -> String {
-    let largest: Vec<String> = found
-        .all()
-        .iter()
-        .take(3)
-        .map(|o| format!("{:.2}", o.volume * 1e3))
-        .collect();
     format!(
         "{:>2} objects, largest share {:.3} (largest {})",
         found.count(min_volume),
         found.largest_share(),
-        largest.join(" ")
+        largest_volumes(found, 3)
     )
 }
 
@@ -46,13 +40,15 @@ fn main() {
         .scene_source()
         .map(|source| source.kind.build(source.seed));
     let sizes = model.config().pyramid.volume_sizes.clone();
-    // Crumbs: as `object_counts`, objects below a fifth of the truth's median at the finest grid.
-    let min_volume = scene.as_ref().map_or(0.0, |scene| {
-        let finest = scene
-            .to_volume(GridDims::cube(*sizes.last().unwrap()))
-            .unwrap();
-        objects(&finest).median_volume(0.0).map_or(0.0, |m| 0.2 * m)
+    // Crumbs as `object_counts` counts them, against the truth at the finest grid.
+    let truth = scene.as_ref().map(|scene| {
+        objects(
+            &scene
+                .to_volume(GridDims::cube(*sizes.last().unwrap()))
+                .unwrap(),
+        )
     });
+    let min_volume = crumb_volume(truth.as_ref());
     if let Some(scene) = &scene {
         for &size in &sizes {
             let baked = scene.to_volume(GridDims::cube(size)).unwrap();

@@ -52,6 +52,25 @@ pub fn objects(volume: &radiance_volume::RadianceVolume) -> scene_metrics::Objec
     .unwrap()
 }
 
+/// The crumb threshold of `object_counts` and `objects_by_scale`: objects below a fifth of the
+/// truth's median object are not counted (0 without a truth: every object counts).
+pub fn crumb_volume(truth: Option<&scene_metrics::Objects>) -> f64 {
+    truth
+        .and_then(|t| t.median_volume(0.0))
+        .map_or(0.0, |median| 0.2 * median)
+}
+
+/// The `count` largest objects' volumes in thousandths of the box, as both programs print them.
+pub fn largest_volumes(found: &scene_metrics::Objects, count: usize) -> String {
+    let volumes: Vec<String> = found
+        .all()
+        .iter()
+        .take(count)
+        .map(|o| format!("{:.2}", o.volume * 1e3))
+        .collect();
+    volumes.join(" ")
+}
+
 /// The mean and the (population) standard deviation of `values`.
 pub fn mean_and_sd(values: &[f64]) -> (f64, f64) {
     let mean = values.iter().sum::<f64>() / values.len() as f64;
